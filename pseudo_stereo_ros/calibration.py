@@ -1,0 +1,279 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Camera calibration files: the one format every part of the package reads.
+
+One YAML file per camera, compatible with the output of ROS camera_calibration
+(the camera_info keys ``image_width``, ``image_height``, ``camera_name``,
+``camera_matrix``, ``distortion_model``, ``distortion_coefficients``) plus the
+extrinsics ``rotation_matrix`` (3x3) and ``translation`` (3 values, metres),
+with the convention ``x_cam = R @ x_world + t``.  Other camera_info keys
+(``rectification_matrix``, ``projection_matrix``, ``camera_model``) may be
+present and are ignored.
+"""
+
+from dataclasses import dataclass
+import math
+import os
+from typing import Any, Mapping, Union
+
+import numpy as np
+import yaml
+
+__all__ = [
+    'CalibrationError',
+    'CameraCalibration',
+    'DISTORTION_MODELS',
+    'calibration_from_dict',
+    'calibration_to_dict',
+    'load_calibration',
+    'save_calibration',
+]
+
+#: Distortion model name -> allowed numbers of coefficients (OpenCV order).
+#: ``plumb_bob`` and ``radtan`` are OpenCV's (k1, k2, p1, p2[, k3]),
+#: ``rational_polynomial`` adds (k4, k5, k6), ``equidistant`` is the fisheye
+#: model (k1, k2, k3, k4).
+DISTORTION_MODELS = {
+    'plumb_bob': (4, 5),
+    'radtan': (4, 5),
+    'rational_polynomial': (8,),
+    'equidistant': (4,),
+}
+
+#: Largest allowed deviation of R @ R.T from identity (and of det(R) from 1).
+ROTATION_TOLERANCE = 1e-5
+
+PathLike = Union[str, os.PathLike]
+
+
+class CalibrationError(ValueError):
+    """A calibration file or dictionary is malformed; the message names file, key and reason."""
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCalibration:
+    """
+    Intrinsics, distortion and pose of one camera.
+
+    ``camera_matrix`` is K (3, 3) in pixels, ``dist_coeffs`` D (k,) in OpenCV
+    order for ``distortion_model``, ``rotation`` R (3, 3) and ``translation``
+    t (3,) [m] map world to camera coordinates: ``x_cam = R @ x_world + t``.
+    """
+
+    camera_name: str
+    image_width: int
+    image_height: int
+    camera_matrix: np.ndarray
+    distortion_model: str
+    dist_coeffs: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    @property
+    def center(self) -> np.ndarray:
+        """Return the optical centre in the world frame, (3,) [m]."""
+        return -self.rotation.T @ self.translation
+
+
+def _fail(source: str, key: str, reason: str) -> CalibrationError:
+    return CalibrationError(f'{source}: key {key!r}: {reason}')
+
+
+def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.ndarray:
+    """Read ``key`` as {rows, cols, data}, a nested list or a flat list of the given shape."""
+    if key not in data:
+        raise _fail(source, key, 'missing')
+    value = data[key]
+    if isinstance(value, Mapping):
+        if 'data' not in value:
+            raise _fail(source, key, "missing 'data' (expected {rows, cols, data})")
+        rows, cols = value.get('rows'), value.get('cols')
+        values = value['data']
+        if rows is not None and cols is not None:
+            try:
+                declared = (int(rows), int(cols))
+            except (TypeError, ValueError):
+                raise _fail(source, key, f'rows/cols are not integers: {rows!r}, {cols!r}') from None
+            if not isinstance(values, list) or len(values) != declared[0] * declared[1]:
+                count = len(values) if isinstance(values, list) else 'no list of'
+                raise _fail(source, key,
+                            f'rows x cols = {declared[0]}x{declared[1]} but data has {count} values')
+    else:
+        values = value
+    try:
+        array = np.array(values, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise _fail(source, key, f'not a numeric matrix ({err})') from err
+    size = int(np.prod(shape))
+    if array.size != size:
+        raise _fail(source, key, f'expected {size} values for shape {shape}, got {array.size}')
+    if array.ndim > 1 and array.shape != shape and len(shape) > 1:
+        raise _fail(source, key, f'expected shape {shape}, got {array.shape}')
+    array = array.reshape(shape)
+    if not np.all(np.isfinite(array)):
+        raise _fail(source, key, 'contains a non-finite value')
+    return array
+
+
+def _positive_int(data: Mapping[str, Any], key: str, source: str) -> int:
+    if key not in data:
+        raise _fail(source, key, 'missing')
+    value = data[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) \
+            or value <= 0:
+        raise _fail(source, key, f'expected a positive integer, got {value!r}')
+    return int(value)
+
+
+def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
+                          raw_name: str = None) -> CameraCalibration:
+    """
+    Build a calibration from a parsed YAML mapping, validating every key.
+
+    :param data: the mapping as read by ``yaml.safe_load``
+    :param source: the file name used in error messages
+    :param raw_name: ``camera_name`` exactly as written in the file (YAML may
+        have read a numeric name such as 22276213 as a number)
+    :return: the validated calibration
+    :raises CalibrationError: naming the source, the key and the reason
+    """
+    if not isinstance(data, Mapping):
+        raise CalibrationError(f'{source}: expected a YAML mapping of calibration keys, '
+                               f'got {type(data).__name__}')
+    if 'camera_name' not in data or data['camera_name'] is None:
+        raise _fail(source, 'camera_name', 'missing')
+    name = raw_name if raw_name is not None else data['camera_name']
+    if isinstance(name, float) and name.is_integer():
+        name = int(name)
+    name = str(name).strip()
+    if not name:
+        raise _fail(source, 'camera_name', 'empty')
+
+    width = _positive_int(data, 'image_width', source)
+    height = _positive_int(data, 'image_height', source)
+    camera_matrix = _matrix(data, 'camera_matrix', (3, 3), source)
+    fx, fy = camera_matrix[0, 0], camera_matrix[1, 1]
+    if fx <= 0 or fy <= 0:
+        raise _fail(source, 'camera_matrix', f'focal lengths must be positive, got {fx}, {fy}')
+    if not np.allclose(camera_matrix[2], (0.0, 0.0, 1.0)) or camera_matrix[1, 0] != 0:
+        raise _fail(source, 'camera_matrix', 'expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]]')
+
+    if 'distortion_model' not in data:
+        raise _fail(source, 'distortion_model', 'missing')
+    model = str(data['distortion_model'])
+    if model not in DISTORTION_MODELS:
+        raise _fail(source, 'distortion_model',
+                    f'unknown model {model!r} (known: {", ".join(DISTORTION_MODELS)})')
+    raw_coeffs = data.get('distortion_coefficients')
+    if raw_coeffs is None:
+        raise _fail(source, 'distortion_coefficients', 'missing')
+    if isinstance(raw_coeffs, Mapping):
+        count = len(raw_coeffs.get('data') or [])
+    else:
+        count = len(raw_coeffs) if isinstance(raw_coeffs, list) else 0
+    allowed = DISTORTION_MODELS[model]
+    if count not in allowed:
+        raise _fail(source, 'distortion_coefficients',
+                    f'model {model!r} takes {" or ".join(map(str, allowed))} coefficients, '
+                    f'got {count}')
+    dist_coeffs = _matrix(data, 'distortion_coefficients', (count,), source)
+
+    rotation = _matrix(data, 'rotation_matrix', (3, 3), source)
+    deviation = np.abs(rotation @ rotation.T - np.eye(3)).max()
+    det = np.linalg.det(rotation)
+    if deviation > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+        raise _fail(source, 'rotation_matrix',
+                    f'not a rotation (|R R^T - I| = {deviation:.2g}, det = {det:.6g})')
+    translation = _matrix(data, 'translation', (3,), source)
+
+    for array in (camera_matrix, dist_coeffs, rotation, translation):
+        array.setflags(write=False)
+    return CameraCalibration(
+        camera_name=name, image_width=width, image_height=height,
+        camera_matrix=camera_matrix, distortion_model=model, dist_coeffs=dist_coeffs,
+        rotation=rotation, translation=translation)
+
+
+def load_calibration(path: PathLike) -> CameraCalibration:
+    """
+    Read and validate one camera's calibration YAML file.
+
+    :param path: the file
+    :return: the calibration
+    :raises CalibrationError: the file is missing, not YAML, or malformed;
+        the message names the file, the key and the reason
+    """
+    source = os.fspath(path)
+    try:
+        with open(path, encoding='utf-8') as stream:
+            text = stream.read()
+    except OSError as err:
+        raise CalibrationError(f'{source}: cannot read calibration file: {err.strerror}') from err
+    try:
+        data = yaml.safe_load(text)
+        # BaseLoader keeps every scalar as written, so a numeric camera_name keeps its digits.
+        raw = yaml.load(text, Loader=yaml.BaseLoader)  # noqa: S506 - BaseLoader builds no objects
+    except yaml.YAMLError as err:
+        raise CalibrationError(f'{source}: not valid YAML: {err}') from err
+    raw_name = raw.get('camera_name') if isinstance(raw, dict) else None
+    if not isinstance(raw_name, str):
+        raw_name = None
+    return calibration_from_dict(data, source=source, raw_name=raw_name)
+
+
+def _yaml_matrix(array: np.ndarray) -> dict:
+    rows, cols = (1, array.size) if array.ndim == 1 else array.shape
+    return {'rows': rows, 'cols': cols, 'data': [float(x) for x in array.ravel()]}
+
+
+def calibration_to_dict(calibration: CameraCalibration) -> dict:
+    """
+    Return the calibration as a camera_info-compatible mapping.
+
+    :param calibration: the calibration
+    :return: a mapping ready for ``yaml.safe_dump``
+    """
+    k = calibration.camera_matrix
+    projection = np.zeros((3, 4))
+    projection[:, :3] = k
+    return {
+        'image_width': calibration.image_width,
+        'image_height': calibration.image_height,
+        'camera_name': calibration.camera_name,
+        'camera_matrix': _yaml_matrix(k),
+        'distortion_model': calibration.distortion_model,
+        'distortion_coefficients': _yaml_matrix(calibration.dist_coeffs),
+        'rectification_matrix': _yaml_matrix(np.eye(3)),
+        'projection_matrix': _yaml_matrix(projection),
+        'rotation_matrix': _yaml_matrix(calibration.rotation),
+        'translation': [float(x) for x in calibration.translation],
+    }
+
+
+def save_calibration(calibration: CameraCalibration, path: PathLike) -> None:
+    """
+    Write a calibration YAML file that :func:`load_calibration` reads back exactly.
+
+    :param calibration: the calibration
+    :param path: the file to write
+    """
+    data = calibration_to_dict(calibration)
+    for value in (data['camera_matrix'], data['distortion_coefficients'],
+                  data['rotation_matrix']):
+        if not all(math.isfinite(x) for x in value['data']):
+            raise CalibrationError(f'{os.fspath(path)}: refusing to write non-finite values')
+    with open(path, 'w', encoding='utf-8') as stream:
+        yaml.safe_dump(data, stream, sort_keys=False)

@@ -1,0 +1,402 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The event-driven fuser: one observation in, at most one 3D estimate out.
+
+``paper`` is Section 2 of Shimizu et al., "A Pseudo Stereo Vision Method for
+Unsynchronized Cameras", written over actual stamps so that delta12 and
+delta21 come from the data at every event and the roles of the cameras swap
+by themselves ("the suffixes are cycled").  At an observation of camera A at
+time t, with partner camera B:
+
+1. The two newest earlier frames of either camera (normally B's t'-1 and
+   A's t-1) become anchors.  At each anchor frame of camera X the other
+   camera Y's point is interpolated linearly in time between the two Y frames
+   that bracket it (Step I; for A's t-1 that is B's t'-2 and t'-1, for B's
+   t'-1 it is A's t-1 and the newest frame t), moved onto the epipolar line of
+   the anchor (Step II) and triangulated with it (Step III).
+2. The two anchor points are extrapolated linearly to t (Eq. 3).
+3. The estimate is the nearest point on A's newest viewing ray (Eq. 5).
+
+Step I interpolates *undistorted* image points (the paper's cameras have no
+distortion; interpolation in raw distorted pixels would bend the motion).
+Anchor points are cached on their frames: each event triangulates once.
+
+``naive`` is the paper's "unsynchronized" baseline: the newest point with the
+partner's latest point, as if simultaneous.
+
+Observations of two cameras within ``sync_tolerance_ns`` are simultaneous
+and are triangulated directly (the paper's Section 4.4 fallback).
+
+Imperfect input: interpolation spans at most ``max_gap_ns``; data older than
+that is never used (a silent camera produces no estimates, and a camera or the
+whole rig coming back after a pause starts a fresh history); duplicate and
+out-of-order stamps and non-finite pixels are dropped and counted in
+:attr:`Fuser.stats`.  An estimate is never NaN or infinite.
+"""
+
+from collections import Counter
+import math
+from typing import Iterable, List, Mapping, NamedTuple, Optional, Sequence, Union
+
+import numpy as np
+
+from .camera import Camera
+from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
+
+__all__ = [
+    'DEFAULT_MAX_GAP_NS',
+    'DEFAULT_SYNC_TOLERANCE_NS',
+    'DROP_REASONS',
+    'Estimate',
+    'Fuser',
+    'METHODS',
+    'Observation',
+    'fuse',
+]
+
+METHODS = ('paper', 'naive')
+
+#: Default for treating two cameras' observations as simultaneous: 1 ms, 3% of a 30 fps period.
+DEFAULT_SYNC_TOLERANCE_NS = 1_000_000
+#: Default longest gap bridged by interpolation or used as history: 0.1 s (3 periods at 30 fps).
+DEFAULT_MAX_GAP_NS = 100_000_000
+
+#: Why an observation gave no estimate (keys of :attr:`Fuser.stats`).
+DROP_REASONS = {
+    'unknown_camera': 'the camera name is not one of the configured cameras',
+    'non_finite': 'u or v is NaN or infinite',
+    'duplicate': 'same stamp as the previous observation of that camera',
+    'out_of_order': 'stamp older than an observation already processed',
+    'undistort_failed': 'the pixel could not be undistorted (far outside the lens model)',
+    'no_partner': 'no other camera has an observation within max_gap',
+    'warming_up': 'not enough recent history yet for the method',
+    'degenerate': 'parallel rays or a non-finite result',
+}
+
+# Frames kept per camera; the method needs three, the rest absorbs short bursts of one camera.
+_HISTORY = 8
+
+
+class Observation(NamedTuple):
+    """One detection: camera name, shutter stamp [integer ns], raw pixel (u, v)."""
+
+    camera: str
+    stamp_ns: int
+    u: float
+    v: float
+
+
+class Estimate(NamedTuple):
+    """
+    One 3D estimate at a shutter event.
+
+    ``x, y, z`` are world coordinates [m], ``stamp_ns`` the shutter stamp of
+    the event, ``camera`` the camera that fired, and ``kind`` one of
+    ``'pseudo'`` (paper method), ``'sync'`` (simultaneous pair) or
+    ``'naive'``.
+    """
+
+    stamp_ns: int
+    camera: str
+    x: float
+    y: float
+    z: float
+    kind: str
+
+
+class _Frame:
+    """One observation with its undistorted point, ray and cached anchor points."""
+
+    __slots__ = ('stamp', 'ideal', 'direction', 'anchors')
+
+    def __init__(self, stamp: int, ideal: tuple, direction: tuple):
+        self.stamp = stamp
+        self.ideal = ideal
+        self.direction = direction
+        # partner name -> pseudo-stereo point (or None when it could not be formed)
+        self.anchors = {}
+
+
+class _View:
+    """Per-camera state: the camera, its inverse intrinsics and its recent frames."""
+
+    __slots__ = ('camera', 'name', 'center', 'k', 'frames', 'fundamental')
+
+    def __init__(self, camera: Camera):
+        self.camera = camera
+        self.name = camera.name
+        self.center = camera.center_tuple
+        k = camera.K
+        self.k = (float(k[0, 0]), float(k[0, 1]), float(k[0, 2]), float(k[1, 1]),
+                  float(k[1, 2]))
+        self.frames: List[_Frame] = []
+        # partner name -> F rows (plain floats) mapping this camera's ideal pixels to lines
+        self.fundamental = {}
+
+    def ideal_to_direction(self, iu: float, iv: float) -> tuple:
+        fx, skew, cx, fy, cy = self.k
+        y = (iv - cy) / fy
+        return self.camera.direction_of((iu - cx - skew * y) / fx, y)
+
+
+class Fuser:
+    """
+    Event-driven fusion of stamped image points from unsynchronized cameras.
+
+    :param cameras: the calibrated cameras (a sequence, or a mapping name -> camera)
+    :param method: ``'paper'`` or ``'naive'``
+    :param sync_tolerance_ns: observations of two cameras closer than this are simultaneous
+    :param max_gap_ns: longest interval bridged by interpolation; older data is not used
+    """
+
+    def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
+                 method: str = 'paper', sync_tolerance_ns: int = None,
+                 max_gap_ns: int = None):
+        if isinstance(cameras, Mapping):
+            cameras = list(cameras.values())
+        cameras = list(cameras)
+        if len(cameras) < 2:
+            raise ValueError(f'the fuser needs at least two cameras, got {len(cameras)}')
+        names = [camera.name for camera in cameras]
+        if len(set(names)) != len(names):
+            raise ValueError(f'camera names must be unique, got {names}')
+        if method not in METHODS:
+            raise ValueError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+        self.sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
+                                     else sync_tolerance_ns)
+        self.max_gap_ns = int(DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns)
+        if self.sync_tolerance_ns < 0:
+            raise ValueError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
+        if self.max_gap_ns <= self.sync_tolerance_ns:
+            raise ValueError(f'max_gap_ns ({self.max_gap_ns}) must exceed sync_tolerance_ns '
+                             f'({self.sync_tolerance_ns})')
+        self.method = method
+        self._views = {camera.name: _View(camera) for camera in cameras}
+        for view in self._views.values():
+            for other in self._views.values():
+                if other is not view:
+                    f = fundamental_matrix(view.camera, other.camera)
+                    view.fundamental[other.name] = tuple(tuple(float(x) for x in row)
+                                                         for row in f)
+        self._update = self._paper if method == 'paper' else self._naive
+        self._newest = None
+        #: Counts: ``observations``, ``estimates``, ``resets`` and one key per drop reason.
+        self.stats = Counter()
+
+    @property
+    def camera_names(self) -> List[str]:
+        """Return the configured camera names, in order."""
+        return list(self._views)
+
+    def reset(self) -> None:
+        """Forget all history (counters are kept)."""
+        for view in self._views.values():
+            view.frames.clear()
+        self._newest = None
+
+    def update(self, observation: Observation) -> Optional[Estimate]:
+        """
+        Process one observation.
+
+        :param observation: camera name, stamp [ns], raw pixel
+        :return: the estimate at this shutter event, or None (the reason is counted in stats)
+        """
+        stats = self.stats
+        stats['observations'] += 1
+        camera, stamp, u, v = observation
+        view = self._views.get(camera)
+        if view is None:
+            stats['unknown_camera'] += 1
+            return None
+        if not (math.isfinite(u) and math.isfinite(v)):
+            stats['non_finite'] += 1
+            return None
+        stamp = int(stamp)
+        frames = view.frames
+        if frames and stamp <= frames[-1].stamp:
+            stats['duplicate' if stamp == frames[-1].stamp else 'out_of_order'] += 1
+            return None
+        newest = self._newest
+        if newest is not None:
+            if stamp < newest:
+                stats['out_of_order'] += 1
+                return None
+            if stamp - newest > self.max_gap_ns:
+                # A pause of the whole rig: the next flight starts from scratch.
+                self.reset()
+                stats['resets'] += 1
+            elif frames and stamp - frames[-1].stamp > self.max_gap_ns:
+                frames.clear()  # this camera was silent: its old frames say nothing now
+                stats['resets'] += 1
+        x, y = view.camera.normalize_one(u, v)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            stats['undistort_failed'] += 1
+            return None
+        fx, skew, cx, fy, cy = view.k
+        frame = _Frame(stamp, (fx * x + skew * y + cx, fy * y + cy), view.camera.direction_of(x, y))
+        frames.append(frame)
+        if len(frames) > _HISTORY:
+            del frames[0]
+        self._newest = stamp
+
+        partner = self._partner(view, stamp)
+        if partner is None:
+            stats['no_partner'] += 1
+            return None
+        result = self._update(view, frame, partner)
+        if result is None:
+            return None
+        point, kind = result
+        if not (math.isfinite(point[0]) and math.isfinite(point[1]) and math.isfinite(point[2])):
+            stats['degenerate'] += 1
+            return None
+        stats['estimates'] += 1
+        return Estimate(stamp, camera, point[0], point[1], point[2], kind)
+
+    # -- methods --------------------------------------------------------------------------------
+
+    def _partner(self, view: _View, stamp: int) -> Optional[_View]:
+        """Return the other camera that fired most recently within max_gap, if any."""
+        best = None
+        for other in self._views.values():
+            if other is view or not other.frames:
+                continue
+            if stamp - other.frames[-1].stamp > self.max_gap_ns:
+                continue
+            if best is None or other.frames[-1].stamp > best.frames[-1].stamp:
+                best = other
+        return best
+
+    def _direct(self, view: _View, frame: _Frame, partner: _View, other: _Frame):
+        point = triangulate_rays_one(view.center, frame.direction, partner.center, other.direction)
+        if point is None:
+            self.stats['degenerate'] += 1
+            return None
+        return point
+
+    def _naive(self, view: _View, frame: _Frame, partner: _View):
+        point = self._direct(view, frame, partner, partner.frames[-1])
+        return None if point is None else (point, 'naive')
+
+    def _paper(self, view: _View, frame: _Frame, partner: _View):
+        partner_newest = partner.frames[-1]
+        if frame.stamp - partner_newest.stamp <= self.sync_tolerance_ns:
+            point = self._direct(view, frame, partner, partner_newest)
+            return None if point is None else (point, 'sync')
+
+        # Anchors: the two newest earlier frames of either camera at which a pseudo-stereo point
+        # exists, at least sync_tolerance apart (normally B's t'-1 and A's t-1).
+        oldest = frame.stamp - self.max_gap_ns
+        own, theirs = view.frames, partner.frames
+        i, j = len(own) - 2, len(theirs) - 1
+        anchors = []
+        while len(anchors) < 2 and (i >= 0 or j >= 0):
+            if j < 0 or (i >= 0 and own[i].stamp > theirs[j].stamp):
+                candidate, x_view, y_view = own[i], view, partner
+                i -= 1
+            else:
+                candidate, x_view, y_view = theirs[j], partner, view
+                j -= 1
+            if candidate.stamp < oldest:
+                break
+            if anchors and anchors[0][0] - candidate.stamp <= self.sync_tolerance_ns:
+                continue
+            point = self._anchor(candidate, x_view, y_view)
+            if point is not None:
+                anchors.append((candidate.stamp, point))
+        if len(anchors) < 2:
+            self.stats['warming_up'] += 1
+            return None
+
+        # Eq. 3: linear prediction to the newest shutter time, from actual stamps.
+        (t1, p1), (t0, p0) = anchors
+        gain = (frame.stamp - t1) / (t1 - t0)
+        predicted = (p1[0] + gain * (p1[0] - p0[0]), p1[1] + gain * (p1[1] - p0[1]),
+                     p1[2] + gain * (p1[2] - p0[2]))
+        # Eq. 5: the nearest point on the newest observation's viewing ray.
+        return nearest_point_on_line_one(predicted, view.center, frame.direction), 'pseudo'
+
+    def _anchor(self, frame: _Frame, x_view: _View, y_view: _View) -> Optional[tuple]:
+        """Steps I-III at ``frame`` of camera X with camera Y; cached on the frame."""
+        cached = frame.anchors.get(y_view.name, False)
+        if cached is not False:
+            return cached
+        frames = y_view.frames
+        stamp = frame.stamp
+        k = len(frames) - 1
+        while k >= 0 and frames[k].stamp > stamp:
+            k -= 1
+        if k == len(frames) - 1:
+            # No Y frame after this one yet; it may come, so cache nothing.
+            return None
+        after = frames[k + 1]
+        tolerance = self.sync_tolerance_ns
+        point = None
+        if after.stamp - stamp <= tolerance:
+            point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
+                                         after.direction)
+        elif k >= 0 and stamp - frames[k].stamp <= tolerance:
+            point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
+                                         frames[k].direction)
+        elif k >= 0 and after.stamp - frames[k].stamp <= self.max_gap_ns:
+            before = frames[k]
+            # Step I: linear interpolation over stamps. For X = camera 1 at t-1 this is Eq. 1,
+            # (delta12 * u(t'-2) + delta21 * u(t'-1)) / (delta12 + delta21): each sample is
+            # weighted by the *other* sample's distance in time.
+            w_after = (stamp - before.stamp) / (after.stamp - before.stamp)
+            w_before = 1.0 - w_after
+            iu = w_before * before.ideal[0] + w_after * after.ideal[0]
+            iv = w_before * before.ideal[1] + w_after * after.ideal[1]
+            # Step II: the nearest point on the epipolar line of X's point in Y's image.
+            f0, f1, f2 = x_view.fundamental[y_view.name]
+            pu, pv = frame.ideal
+            a = f0[0] * pu + f0[1] * pv + f0[2]
+            b = f1[0] * pu + f1[1] * pv + f1[2]
+            c = f2[0] * pu + f2[1] * pv + f2[2]
+            norm2 = a * a + b * b
+            if norm2 > 0.0:
+                distance = (a * iu + b * iv + c) / norm2
+                iu -= distance * a
+                iv -= distance * b
+            # Step III: triangulate X's ray with the ray through the corrected point.
+            point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
+                                         y_view.ideal_to_direction(iu, iv))
+        frame.anchors[y_view.name] = point
+        return point
+
+
+def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
+         observations: Iterable[Observation], **options) -> tuple:
+    """
+    Run a fuser over recorded observations in stamp order.
+
+    Observations are sorted by stamp first (ties keep their given order), so
+    rows of a file may come in any order.
+
+    :param cameras: the calibrated cameras
+    :param observations: the observations, any order
+    :param options: keyword options of :class:`Fuser`
+    :return: ``(estimates, stats)``: the list of :class:`Estimate` and the fuser's counters
+    """
+    fuser = Fuser(cameras, **options)
+    ordered = sorted(observations, key=lambda obs: obs.stamp_ns)
+    estimates = [estimate for estimate in map(fuser.update, ordered) if estimate is not None]
+    return estimates, fuser.stats
+
+
+def estimates_to_array(estimates: Sequence[Estimate]) -> np.ndarray:
+    """Return the (N, 3) positions [m] of a list of estimates."""
+    return np.array([(e.x, e.y, e.z) for e in estimates], dtype=float).reshape(-1, 3)
