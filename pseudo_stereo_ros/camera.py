@@ -60,11 +60,12 @@ class Camera:
     One calibrated camera (see :mod:`pseudo_stereo_ros.calibration` for the conventions).
 
     :param calibration: intrinsics, distortion and pose
+    :param name: the name the data uses for this camera (default: the file's ``camera_name``)
     """
 
-    def __init__(self, calibration: CameraCalibration):
+    def __init__(self, calibration: CameraCalibration, *, name: str = None):
         self.calibration = calibration
-        self.name = calibration.camera_name
+        self.name = calibration.camera_name if name is None else str(name)
         self.K = np.array(calibration.camera_matrix, dtype=float)
         self.D = np.array(calibration.dist_coeffs, dtype=float)
         self.R = np.array(calibration.rotation, dtype=float)
@@ -80,9 +81,9 @@ class Camera:
         self.rotation_t_rows = tuple(tuple(float(x) for x in row) for row in self.R.T)
 
     @classmethod
-    def from_file(cls, path: PathLike) -> 'Camera':
-        """Load a camera from its calibration YAML file."""
-        return cls(load_calibration(path))
+    def from_file(cls, path: PathLike, *, name: str = None) -> 'Camera':
+        """Load a camera from its calibration YAML file (optionally under another name)."""
+        return cls(load_calibration(path), name=name)
 
     def __repr__(self) -> str:
         return f'Camera({self.name!r}, center={np.round(self.center, 3).tolist()})'

@@ -339,20 +339,13 @@ class Fuser:
         k = len(frames) - 1
         while k >= 0 and frames[k].stamp > stamp:
             k -= 1
-        if k == len(frames) - 1:
-            # No Y frame after this one yet; it may come, so cache nothing.
+        before = frames[k] if k >= 0 else None
+        after = frames[k + 1] if k + 1 < len(frames) else None
+        if after is None:
+            # No Y frame after this one yet; one may come, so cache nothing. (A Y frame at the
+            # same stamp is found as `before` and interpolated with weight 1 once `after` exists.)
             return None
-        after = frames[k + 1]
-        tolerance = self.sync_tolerance_ns
-        point = None
-        if after.stamp - stamp <= tolerance:
-            point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
-                                         after.direction)
-        elif k >= 0 and stamp - frames[k].stamp <= tolerance:
-            point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
-                                         frames[k].direction)
-        elif k >= 0 and after.stamp - frames[k].stamp <= self.max_gap_ns:
-            before = frames[k]
+        if before is not None and after.stamp - before.stamp <= self.max_gap_ns:
             # Step I: linear interpolation over stamps. For X = camera 1 at t-1 this is Eq. 1,
             # (delta12 * u(t'-2) + delta21 * u(t'-1)) / (delta12 + delta21): each sample is
             # weighted by the *other* sample's distance in time.
@@ -374,6 +367,14 @@ class Fuser:
             # Step III: triangulate X's ray with the ray through the corrected point.
             point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
                                          y_view.ideal_to_direction(iu, iv))
+        else:
+            # No bracket within max_gap: only a simultaneous Y frame can serve.
+            nearest = min((f for f in (before, after) if f is not None),
+                          key=lambda f: abs(f.stamp - stamp))
+            point = None
+            if abs(nearest.stamp - stamp) <= self.sync_tolerance_ns:
+                point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
+                                             nearest.direction)
         frame.anchors[y_view.name] = point
         return point
 

@@ -1,0 +1,237 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The fuser: the paper's method, its timing, and every imperfect-input rule.
+
+Most tests use a rig where the method is *exact*: two horizontal cameras at
+right angles and a ball moving uniformly along the vertical line where their
+optical axes cross.  Its depth is constant in both cameras, so its image
+motion is exactly linear in time, Step I's interpolation and Eq. 3's
+prediction are exact, and any error in weights, stamps or bookkeeping shows
+as an error far above round-off (the ball moves 3 mm per ms).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from pseudo_stereo_ros.camera import Camera
+from pseudo_stereo_ros.fusion import estimates_to_array, fuse, Fuser, Observation
+from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, make_scenario, observe, Scenario,
+                                          shutter_stamps, truth_at)
+from pseudo_stereo_ros.simulation import look_at_calibration
+
+SPEED = 3.0  # m/s, the paper's uniform motions
+EXACT_M = 1e-7  # round-off bound [m]; one wrong interpolation weight costs millimetres
+
+
+def cross_rig(count=2):
+    positions = [(0.0, -3.0, 1.0), (3.0, 0.0, 1.0), (-3.0, 0.0, 1.0)][:count]
+    return [Camera(look_at_calibration(f'camera{k + 1}', p, (0.0, 0.0, 1.0)))
+            for k, p in enumerate(positions)]
+
+
+def vertical(speed=SPEED, z0=0.5, duration=0.3, x=0.0):
+    return Scenario('vertical', duration,
+                    lambda t: np.column_stack((np.full_like(np.asarray(t, float), x),
+                                               np.zeros_like(np.asarray(t, float)),
+                                               z0 + speed * np.asarray(t, float))),
+                    'uniform vertical motion on the axes crossing')
+
+
+def record(scenario, cameras, phases, fps=30.0, **options):
+    stamps = [shutter_stamps(f, scenario.duration_s, phase_s=p)
+              for f, p in zip(np.broadcast_to(fps, len(phases)), phases)]
+    return observe(scenario, cameras, stamps, quantization_px=0.0, **options)
+
+
+def errors(estimates, scenario, epoch_ns=DEFAULT_EPOCH_NS):
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    truth = truth_at(scenario, stamps, epoch_ns=epoch_ns)
+    return np.linalg.norm(estimates_to_array(estimates) - truth, axis=1)
+
+
+@pytest.mark.parametrize('delta12', [1 / 60, 1 / 90, 2 / 90, 0.004, 0.029])
+def test_paper_is_exact_on_uniform_motion_with_any_delta(delta12):
+    # Step I with delta12 != delta21: each sample weighted by the other one's distance in time.
+    cameras = cross_rig()
+    scenario = vertical()
+    observations = record(scenario, cameras, (0.0, delta12))
+    estimates, stats = fuse(cameras, observations)
+    assert len(estimates) == len(observations) - 3  # every event after the warm-up
+    assert {e.kind for e in estimates} == {'pseudo'}
+    assert errors(estimates, scenario).max() < EXACT_M
+    # The roles swap at every event ("the suffixes are cycled").
+    assert {e.camera for e in estimates} == {'camera1', 'camera2'}
+
+
+def test_naive_baseline_is_off_by_the_motion_during_the_delay():
+    cameras = cross_rig()
+    scenario = vertical()
+    estimates, _ = fuse(cameras, record(scenario, cameras, (0.0, 1 / 60)), method='naive')
+    # The partner's point is 1/60 s old: 50 mm of motion, about half of it in the midpoint.
+    assert 0.01 < np.median(errors(estimates, scenario)) < 0.05
+
+
+def test_drifting_offsets_are_taken_from_the_stamps():
+    # Camera 2 runs 1% fast: delta12 drifts through the whole frame period.
+    cameras = cross_rig()
+    scenario = vertical(duration=3.0, speed=0.3)
+    stamps = [shutter_stamps(30.0, 3.0), shutter_stamps(30.3, 3.0, phase_s=0.005)]
+    observations = observe(scenario, cameras, stamps, quantization_px=0.0)
+    estimates, _ = fuse(cameras, observations)
+    pseudo = [e for e in estimates if e.kind == 'pseudo']
+    assert len(pseudo) > 150
+    assert errors(pseudo, scenario).max() < EXACT_M
+    # Where the shutters pass within sync_tolerance (1 ms) the pair counts as simultaneous: the
+    # error is bounded by the motion in that time.
+    synchronized = [e for e in estimates if e.kind == 'sync']
+    assert synchronized and errors(synchronized, scenario).max() < 0.3 * 1e-3
+
+
+def test_huge_stamps_lose_no_precision():
+    # The same recording at two epochs 1e18 ns apart gives the same positions: no float seconds.
+    cameras = cross_rig()
+    scenario = vertical()
+    results = []
+    for epoch in (10**9, DEFAULT_EPOCH_NS):
+        stamps = [shutter_stamps(30.0, 0.3, epoch_ns=epoch),
+                  shutter_stamps(30.0, 0.3, phase_s=1 / 90, epoch_ns=epoch)]
+        observations = observe(scenario, cameras, stamps, quantization_px=0.0, epoch_ns=epoch)
+        results.append(estimates_to_array(fuse(cameras, observations)[0]))
+    np.testing.assert_allclose(results[0], results[1], atol=1e-12)
+
+
+def test_synchronized_cameras_are_triangulated_directly():
+    cameras = cross_rig()
+    bounce = make_scenario('bounce')  # non-uniform: prediction would not be exact
+    scenario = Scenario('b', 1.0, lambda t: bounce.position(t) - (0.6, 1.0, 0.5), '')
+    observations = record(scenario, cameras, (0.0, 0.0))
+    estimates, _ = fuse(cameras, observations)
+    synchronized = [e for e in estimates if e.kind == 'sync']
+    assert len(synchronized) >= len(observations) // 2 - 1
+    assert errors(synchronized, scenario).max() < EXACT_M
+
+
+def test_missed_detections_are_interpolated_across():
+    cameras = cross_rig()
+    scenario = vertical(duration=1.0, speed=1.0)
+    observations = record(scenario, cameras, (0.0, 1 / 60), dropout=0.25, seed=4)
+    estimates, _ = fuse(cameras, observations)
+    assert len(estimates) > 0.8 * len(observations)
+    assert errors(estimates, scenario).max() < EXACT_M
+
+
+def test_silent_camera_gives_no_stale_estimates_and_resumes():
+    cameras = cross_rig()
+    scenario = vertical(duration=1.0, speed=1.0)
+    observations = record(scenario, cameras, (0.0, 1 / 60))
+    start, end = DEFAULT_EPOCH_NS + 300_000_000, DEFAULT_EPOCH_NS + 600_000_000
+    kept = [o for o in observations if not (o.camera == 'camera2' and start <= o.stamp_ns < end)]
+    fuser = Fuser(cameras, max_gap_ns=100_000_000)
+    estimates = [e for e in map(fuser.update, kept) if e is not None]
+    stamps = np.array([e.stamp_ns for e in estimates])
+    last_camera2 = max(o.stamp_ns for o in kept if o.stamp_ns < start)
+    # Nothing from data older than max_gap while camera 2 is silent ...
+    assert not np.any((stamps > last_camera2 + 100_000_000) & (stamps < end))
+    assert fuser.stats['no_partner'] > 0
+    # ... and clean estimates again within a few events of its return.
+    after = stamps[stamps >= end]
+    assert after.size > 0 and after[0] - end < 4 * 33_400_000
+    assert errors(estimates, scenario).max() < EXACT_M
+
+
+def test_new_flight_after_a_pause_starts_a_fresh_history():
+    cameras = cross_rig()
+    first = vertical(duration=0.3, speed=3.0, z0=0.3)
+    second = vertical(duration=0.3, speed=-2.0, z0=1.6, x=0.2)
+    pause_ns = 2_000_000_000
+    observations = record(first, cameras, (0.0, 1 / 60))
+    later = [o._replace(stamp_ns=o.stamp_ns + pause_ns)
+             for o in record(second, cameras, (0.01, 0.01 + 1 / 60))]
+    fuser = Fuser(cameras)
+    estimates = [e for e in map(fuser.update, observations + later) if e is not None]
+    assert fuser.stats['resets'] == 1
+    one = [e for e in estimates if e.stamp_ns < DEFAULT_EPOCH_NS + pause_ns]
+    two = [e for e in estimates if e.stamp_ns >= DEFAULT_EPOCH_NS + pause_ns]
+    assert len(two) == len(later) - 3  # the second flight warms up again, then every event
+    assert errors(one, first).max() < EXACT_M
+    assert errors(two, second, epoch_ns=DEFAULT_EPOCH_NS + pause_ns).max() < EXACT_M
+
+
+def test_duplicates_out_of_order_and_non_finite_are_dropped_and_counted():
+    cameras = cross_rig()
+    scenario = vertical()
+    clean = record(scenario, cameras, (0.0, 1 / 60))
+    noisy = []
+    for k, observation in enumerate(clean):
+        noisy.append(observation)
+        if k % 5 == 2:
+            noisy.append(observation)  # duplicate
+        if k % 7 == 3 and k > 1:
+            noisy.append(clean[k - 2])  # late arrival
+        if k % 6 == 4:
+            noisy.append(observation._replace(stamp_ns=observation.stamp_ns + 1, u=math.nan))
+        if k % 9 == 1:
+            noisy.append(observation._replace(camera='camera9'))
+    fuser = Fuser(cameras)
+    estimates = [e for e in map(fuser.update, noisy) if e is not None]
+    reference, _ = fuse(cameras, clean)
+    assert estimates == reference
+    stats = fuser.stats
+    assert stats['duplicate'] == len(range(2, len(clean), 5))
+    assert stats['non_finite'] == len(range(4, len(clean), 6))
+    assert stats['unknown_camera'] == len(range(1, len(clean), 9))
+    assert stats['out_of_order'] > 0
+
+
+def test_random_garbage_never_crashes_nor_gives_nan():
+    cameras = cross_rig()
+    rng = np.random.default_rng(7)
+    fuser = Fuser(cameras)
+    values = [0.0, -1e9, 1e9, math.inf, -math.inf, math.nan, 320.0, 1e-300]
+    stamp = DEFAULT_EPOCH_NS
+    for _ in range(3000):
+        stamp += int(rng.integers(-5_000_000, 40_000_000))
+        u = float(rng.choice(values)) if rng.random() < 0.2 else float(rng.uniform(-500, 1200))
+        v = float(rng.uniform(-500, 1000))
+        camera = str(rng.choice(['camera1', 'camera2']))
+        estimate = fuser.update(Observation(camera, stamp, u, v))
+        if estimate is not None:
+            assert all(math.isfinite(x) for x in estimate[2:5])
+    assert fuser.stats['observations'] == 3000
+
+
+def test_three_cameras_pick_the_latest_partner():
+    cameras = cross_rig(3)
+    scenario = vertical()
+    observations = record(scenario, cameras, (0.0, 0.011, 0.022))
+    estimates, _ = fuse(cameras, observations)
+    assert len(estimates) >= len(observations) - 4
+    assert {e.camera for e in estimates} == {'camera1', 'camera2', 'camera3'}
+    assert errors(estimates, scenario).max() < EXACT_M
+
+
+@pytest.mark.parametrize('options, match', [
+    ({'method': 'kalman'}, 'unknown method'),
+    ({'max_gap_ns': 1000, 'sync_tolerance_ns': 1000}, 'must exceed'),
+    ({'sync_tolerance_ns': -1}, '>= 0'),
+])
+def test_bad_configuration_is_refused(options, match):
+    with pytest.raises(ValueError, match=match):
+        Fuser(cross_rig(), **options)
+    with pytest.raises(ValueError, match='at least two cameras'):
+        Fuser(cross_rig()[:1])
