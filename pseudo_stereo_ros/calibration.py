@@ -106,11 +106,12 @@ def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.
             try:
                 declared = (int(rows), int(cols))
             except (TypeError, ValueError):
-                raise _fail(source, key, f'rows/cols are not integers: {rows!r}, {cols!r}') from None
+                raise _fail(source, key,
+                            f'rows/cols are not integers: {rows!r}, {cols!r}') from None
             if not isinstance(values, list) or len(values) != declared[0] * declared[1]:
                 count = len(values) if isinstance(values, list) else 'no list of'
-                raise _fail(source, key,
-                            f'rows x cols = {declared[0]}x{declared[1]} but data has {count} values')
+                raise _fail(source, key, f'rows x cols = {declared[0]}x{declared[1]} '
+                                         f'but data has {count} values')
     else:
         values = value
     try:

@@ -39,8 +39,8 @@ _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-
 def _undistort_function():
     """Return f(points (N,1,2), K, D) -> normalized (N,1,2) for OpenCV 4.6 to 5."""
     if hasattr(cv2, 'undistortPointsIter'):  # OpenCV 4.x
-        return lambda pts, k, d: cv2.undistortPointsIter(pts, k, d, None, None,
-                                                          _UNDISTORT_CRITERIA)
+        return lambda pts, k, d: cv2.undistortPointsIter(
+            pts, k, d, None, None, _UNDISTORT_CRITERIA)
     return lambda pts, k, d: cv2.undistortPoints(pts, k, d, None, None,
                                                  criteria=_UNDISTORT_CRITERIA)
 
@@ -158,7 +158,7 @@ class Camera:
 
     def rays(self, pixels: np.ndarray) -> tuple:
         """
-        Viewing rays of raw pixels.
+        Return the viewing rays of raw pixels.
 
         :param pixels: (N, 2) raw pixels
         :return: ``(origin, directions)``: the optical centre (3,) [m] and (N, 3) directions
@@ -179,4 +179,3 @@ class Camera:
         with np.errstate(invalid='ignore'):
             return ((pixels[:, 0] >= 0) & (pixels[:, 0] <= width - 1)
                     & (pixels[:, 1] >= 0) & (pixels[:, 1] <= height - 1))
-

@@ -192,9 +192,9 @@ def format_table1(results: Dict) -> str:
     columns = list(TABLE1_COLUMNS)
     lines = [
         'Table 1 reproduced: mean error [mm] on the default rig; each cell is',
-        '  MAE = per-coordinate mean absolute error, mean(|dx|+|dy|+|dz|)/3 (the paper\'s metric)',
+        "  MAE = per-coordinate mean absolute error, mean(|dx|+|dy|+|dz|)/3 (the paper's metric)",
         '  3D  = mean 3D distance |P - P_true|',
-        '  paper = the paper\'s Table 1 figure',
+        "  paper = the paper's Table 1 figure",
         '',
         f'{"method":<17}{"fps":>4}' + ''.join(f'{c:>26}' for c in columns),
         f'{"":<21}' + ''.join(f'{"MAE":>9}{"3D":>8}{"paper":>9}' for _ in columns),

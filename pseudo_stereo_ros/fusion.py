@@ -246,7 +246,8 @@ class Fuser:
             stats['undistort_failed'] += 1
             return None
         fx, skew, cx, fy, cy = view.k
-        frame = _Frame(stamp, (fx * x + skew * y + cx, fy * y + cy), view.camera.direction_of(x, y))
+        frame = _Frame(stamp, (fx * x + skew * y + cx, fy * y + cy),
+                       view.camera.direction_of(x, y))
         frames.append(frame)
         if len(frames) > _HISTORY:
             del frames[0]
@@ -330,7 +331,7 @@ class Fuser:
         return nearest_point_on_line_one(predicted, view.center, frame.direction), 'pseudo'
 
     def _anchor(self, frame: _Frame, x_view: _View, y_view: _View) -> Optional[tuple]:
-        """Steps I-III at ``frame`` of camera X with camera Y; cached on the frame."""
+        """Return the Steps I-III point at ``frame`` of camera X with camera Y (cached)."""
         cached = frame.anchors.get(y_view.name, False)
         if cached is not False:
             return cached

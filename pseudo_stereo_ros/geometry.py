@@ -174,8 +174,8 @@ def nearest_point_on_line(points: np.ndarray, origin: np.ndarray,
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     directions = np.asarray(directions, dtype=float).reshape(-1, 3)
     origin = np.asarray(origin, dtype=float)
-    k = np.einsum('ij,ij->i', points - origin, directions) / np.einsum('ij,ij->i', directions,
-                                                                      directions)
+    k = (np.einsum('ij,ij->i', points - origin, directions)
+         / np.einsum('ij,ij->i', directions, directions))
     return origin + k[:, None] * directions
 
 

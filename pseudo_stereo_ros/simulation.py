@@ -272,6 +272,6 @@ def config_dir() -> Path:
 
 
 def default_rig() -> List[Camera]:
-    """Return the two cameras of the default rig (``config/rig/camera1.yaml``, ``camera2.yaml``)."""
+    """Return the two cameras of the default rig (``config/rig/camera{1,2}.yaml``)."""
     rig = config_dir() / 'rig'
     return [Camera.from_file(rig / 'camera1.yaml'), Camera.from_file(rig / 'camera2.yaml')]

@@ -15,12 +15,11 @@
 """Calibration files: round trip, the real rig's format, and every malformed case."""
 
 import numpy as np
-import pytest
-import yaml
-
-from pseudo_stereo_ros.calibration import (CalibrationError, calibration_to_dict,
+from pseudo_stereo_ros.calibration import (calibration_to_dict, CalibrationError,
                                            load_calibration, save_calibration)
 from pseudo_stereo_ros.simulation import config_dir, look_at_calibration
+import pytest
+import yaml
 
 # The real table-tennis rig's camera_1 file, as ROS camera_calibration-style YAML (MIT, see
 # test/data/lfg_table_tennis): a numeric camera_name and an identity projection placeholder.

@@ -26,13 +26,12 @@ as an error far above round-off (the ball moves 3 mm per ms).
 import math
 
 import numpy as np
-import pytest
-
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.fusion import estimates_to_array, fuse, Fuser, Observation
 from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, make_scenario, observe, Scenario,
                                           shutter_stamps, truth_at)
 from pseudo_stereo_ros.simulation import look_at_calibration
+import pytest
 
 SPEED = 3.0  # m/s, the paper's uniform motions
 EXACT_M = 1e-7  # round-off bound [m]; one wrong interpolation weight costs millimetres

@@ -15,14 +15,13 @@
 """Geometry: projection round trips, epipolar lines, triangulation, degenerate cases."""
 
 import numpy as np
-import pytest
-
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.geometry import (epipolar_distance, epipolar_lines,
                                         nearest_point_on_line, nearest_point_on_line_one,
                                         project_onto_lines, triangulate_pixels,
                                         triangulate_rays, triangulate_rays_one)
 from pseudo_stereo_ros.simulation import look_at_calibration
+import pytest
 
 DISTORTIONS = {
     'none': ('plumb_bob', [0.0] * 5),

@@ -16,12 +16,12 @@
 
 import sys
 
+from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..csv_io import CsvError, read_observations, read_truth, write_estimates
 from ..experiments import score
 from ..fusion import (DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, fuse,
                       Fuser, METHODS)
-from . import UsageError
 
 NAME = 'track'
 HELP = 'run the fuser offline on observations (stamp_ns,camera,u,v) -> estimates CSV'
