@@ -14,7 +14,7 @@ PY := $(VENV)/bin/python
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 
-.PHONY: venv venv-dev demo test lint bench clean
+.PHONY: venv venv-dev demo test bench compat clean
 
 venv: $(VENV)/.runtime-stamp
 venv-dev: $(VENV)/.dev-stamp
@@ -40,4 +40,14 @@ bench: venv
 	$(PY) -m pseudo_stereo_ros.cli bench
 
 clean:
-	rm -rf $(VENV) build install log out
+	rm -rf $(VENV) $(COMPAT_VENV) build install log out
+
+# The oldest supported stack on Jazzy's own Python: Python 3.12, numpy 1.26, OpenCV 4.6.
+# Runs the ROS-free core's tests (not part of `make test`: it builds a second environment).
+# Override the interpreter with e.g. `make compat PYTHON_COMPAT=/path/to/python3.12`.
+COMPAT_VENV := .venv-compat
+PYTHON_COMPAT ?= python3.12
+compat:
+	test -x $(COMPAT_VENV)/bin/python || $(PYTHON_COMPAT) -m venv $(COMPAT_VENV)
+	$(COMPAT_VENV)/bin/python -m pip install --quiet 'numpy==1.26.4' 'opencv-python-headless==4.6.0.66' pyyaml matplotlib rosbags pytest $(QUIET_PIP)
+	PYTHONPATH=$(CURDIR) $(COMPAT_VENV)/bin/python -m pytest -p no:cacheprovider test/test_fusion.py test/test_geometry.py test/test_calibration.py test/test_table1.py test/test_cli.py
