@@ -1,0 +1,215 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``replay``: publish a ROS 2 bag (mcap or sqlite3) with its original timing, without rosbag2.
+
+The bag is read with rosbags; each message's CDR bytes are turned into the
+rclpy message with ``rclpy.serialization.deserialize_message`` (so header
+stamps are exactly those recorded) and published at
+``first + (log_time - bag_start) / rate`` on the wall clock.  With
+``publish_clock`` the bag's log time goes out on ``/clock`` before each
+message, for nodes run with ``use_sim_time``.
+
+Parameters: ``bag`` (path, required), ``rate`` (time factor, 2.0 = twice as
+fast), ``start_offset_s`` (skip the bag's first seconds), ``topics`` (topics
+to play; empty = all), ``remap`` (``from:=to`` entries), ``loop``,
+``publish_clock``, ``qos_depth`` and ``wait_for_subscribers_s`` (wait up to
+this long for each topic to have a subscriber before the first message).
+When the bag ends (without ``loop``) the executable exits with status 0.
+"""
+
+import importlib
+import threading
+import time
+from typing import List, Optional
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+
+from .bagio import BagError, iter_raw
+from .node_tools import declare, STARTUP_ERRORS, StartupError
+
+__all__ = ['ReplayNode', 'main', 'message_class']
+
+
+def message_class(msgtype: str):
+    """
+    Return the rclpy message class of a type name such as ``geometry_msgs/msg/PointStamped``.
+
+    :raises StartupError: the type's Python package is not installed
+    """
+    try:
+        from rosidl_runtime_py.utilities import get_message
+    except ImportError:
+        get_message = None
+    try:
+        if get_message is not None:
+            return get_message(msgtype)
+        package, kind, name = msgtype.split('/')
+        return getattr(importlib.import_module(f'{package}.{kind}'), name)
+    except (ValueError, ImportError, AttributeError) as err:
+        raise StartupError(f'message type {msgtype!r} is not available in this environment '
+                           f'({err})') from err
+
+
+def _parse_remap(entries: List[str]) -> dict:
+    remap = {}
+    for entry in entries:
+        source, sep, target = entry.partition(':=')
+        if not sep or not source.startswith('/') or not target.startswith('/'):
+            raise StartupError(f'parameter remap: {entry!r} is not /from:=/to')
+        remap[source] = target
+    return remap
+
+
+class ReplayNode(Node):
+    """Publishes the messages of a bag with their original timing on a worker thread."""
+
+    def __init__(self, **kwargs):
+        super().__init__('replay', **kwargs)
+        self.bag = declare(self, 'bag', '', 'the bag to play (rosbag2 directory, .mcap or .db3)',
+                           read_only=True)
+        self.rate = declare(self, 'rate', 1.0, 'time factor (2.0 = twice as fast)',
+                            min_value=1e-3, read_only=True)
+        self.start_offset_s = declare(self, 'start_offset_s', 0.0,
+                                      'seconds of the bag to skip at the start [s]',
+                                      min_value=0.0, read_only=True)
+        topics = declare(self, 'topics', [''], 'topics to play (empty: all)', read_only=True)
+        remap = declare(self, 'remap', [''], 'topic remappings, /from:=/to', read_only=True)
+        self.loop = declare(self, 'loop', False, 'play the bag again when it ends',
+                            read_only=True)
+        self.publish_clock = declare(self, 'publish_clock', True,
+                                     'publish the bag time on /clock (for use_sim_time)',
+                                     read_only=True)
+        depth = declare(self, 'qos_depth', 100, 'publisher queue depth', min_value=1,
+                        read_only=True)
+        self.wait_for_subscribers_s = declare(
+            self, 'wait_for_subscribers_s', 1.0,
+            'wait up to this long for every topic to have a subscriber before playing [s]',
+            min_value=0.0, read_only=True)
+        if not self.bag:
+            raise StartupError('parameter bag: required (the bag to play)')
+        self.topics = [topic for topic in topics if topic] or None
+        self.remap = _parse_remap([entry for entry in remap if entry])
+
+        # Read the index and types now: a bad bag or topic stops the node at start-up.
+        types = {}
+        for topic, msgtype, _, _ in iter_raw(self.bag, self.topics):
+            types.setdefault(topic, msgtype)
+        if not types:
+            raise BagError(f'{self.bag}: no messages to play')
+        self._classes = {topic: message_class(msgtype) for topic, msgtype in types.items()}
+        qos = QoSProfile(depth=depth)
+        self._outputs = {topic: self.create_publisher(cls, self.remap.get(topic, topic), qos)
+                         for topic, cls in self._classes.items()}
+        self._clock_publisher = None
+        if self.publish_clock:
+            from rosgraph_msgs.msg import Clock
+            self._clock_class = Clock
+            self._clock_publisher = self.create_publisher(Clock, '/clock', qos)
+        #: Messages published, and messages that did not decode (skipped).
+        self.published = 0
+        self.dropped = 0
+        self.finished = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
+        self._thread.start()
+
+    def destroy_node(self):
+        """Stop playback, then destroy the node."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        return super().destroy_node()
+
+    def _play(self):
+        # DDS discovery takes a moment; messages published before a subscriber matched are lost.
+        deadline = time.monotonic() + self.wait_for_subscribers_s
+        while (time.monotonic() < deadline and not self._stop.is_set()
+               and any(p.get_subscription_count() == 0 for p in self._outputs.values())):
+            self._stop.wait(0.02)
+        try:
+            while not self._stop.is_set():
+                self._play_once()
+                if not self.loop:
+                    break
+        except BagError as err:
+            self.get_logger().error(f'playback stopped: {err}')
+        finally:
+            # Reliable subscribers get the tail of the bag before the executable exits.
+            for publisher in self._outputs.values():
+                publisher.wait_for_all_acked(Duration(seconds=1.0))
+            self.get_logger().info(f'played {self.published} messages ({self.dropped} skipped)')
+            self.finished.set()
+
+    def _play_once(self):
+        start_bag: Optional[int] = None
+        start_wall = None
+        offset_ns = int(round(self.start_offset_s * 1e9))
+        for topic, _, log_time, data in iter_raw(self.bag, self.topics):
+            if self._stop.is_set():
+                return
+            if start_bag is None:
+                start_bag = log_time + offset_ns
+            if log_time < start_bag:
+                continue
+            if start_wall is None:
+                start_wall = time.monotonic()
+            due = start_wall + (log_time - start_bag) / 1e9 / self.rate
+            delay = due - time.monotonic()
+            if delay > 0 and self._stop.wait(delay):
+                return
+            try:
+                message = deserialize_message(data, self._classes[topic])
+            except Exception as err:  # noqa: B902 - rclpy raises plain exceptions on bad CDR
+                self.dropped += 1
+                self.get_logger().warning(f'{topic}: a message does not decode ({err})',
+                                          throttle_duration_sec=5.0)
+                continue
+            if self._clock_publisher is not None:
+                clock = self._clock_class()
+                clock.clock.sec, clock.clock.nanosec = divmod(log_time, 1_000_000_000)
+                self._clock_publisher.publish(clock)
+            self._outputs[topic].publish(message)
+            self.published += 1
+
+
+def main(args=None) -> int:
+    """Play a bag; exit 0 at its end, 1 when it cannot start."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = ReplayNode()
+        except STARTUP_ERRORS as err:
+            rclpy.logging.get_logger('replay').fatal(f'cannot start: {err}')
+            return 1
+        while rclpy.ok() and not node.finished.is_set():
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
