@@ -103,6 +103,8 @@ class Camera:
         :return: (N, 2) raw pixels; NaN rows for points on or behind the camera plane
         """
         points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if len(points) == 0:  # cv2.projectPoints returns None for no points
+            return np.empty((0, 2))
         depth = self.world_to_camera(points)[:, 2]
         object_points = points.reshape(-1, 1, 3)
         if self.fisheye:
@@ -124,6 +126,8 @@ class Camera:
         :return: (N, 2) normalized coordinates (X/Z, Y/Z)
         """
         pixels = np.asarray(pixels, dtype=float).reshape(-1, 1, 2)
+        if len(pixels) == 0:
+            return np.empty((0, 2))
         return self._undistort(pixels, self.K, self.D).reshape(-1, 2)
 
     def normalize_one(self, u: float, v: float) -> tuple:

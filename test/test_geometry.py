@@ -66,6 +66,12 @@ def test_triangulation_round_trip(distortion):
     np.testing.assert_allclose(estimated, points, atol=1e-6)
 
 
+def test_empty_input_gives_empty_output():
+    camera, _ = rig('plumb_bob')
+    assert camera.project(np.empty((0, 3))).shape == (0, 2)
+    assert camera.normalize(np.empty((0, 2))).shape == (0, 2)
+
+
 def test_ideal_pixels_round_trip_through_normalized():
     camera, _ = rig('plumb_bob')
     pixels = camera.project(volume_points())

@@ -22,6 +22,9 @@ COMMAND_MODULES = [
     'simulate',
     'track',
     'bench',
+    'holdout',
+    'calibrate',
+    'check',
 ]
 
 
