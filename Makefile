@@ -32,6 +32,8 @@ $(VENV)/.dev-stamp: $(VENV)/.runtime-stamp requirements-dev.txt
 
 demo: venv
 	$(PY) -m pseudo_stereo_ros.cli table1 --out out/table1
+	@# The live pipeline: two virtual cameras, detectors, fuser and monitor for 10 s.
+	$(VENV)/bin/bringup --duration 10 --executor single --plot out/demo_live.png
 
 test: venv-dev
 	$(PY) -m pytest test

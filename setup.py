@@ -13,6 +13,7 @@
 # limitations under the License.
 
 from glob import glob
+from os.path import isfile
 
 from setuptools import find_packages, setup
 
@@ -25,7 +26,9 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*')),
+        # Files only: install_data cannot copy a directory (config/rig has its own entry).
+        ('share/' + package_name + '/config', [f for f in glob('config/*') if isfile(f)]),
+        ('share/' + package_name + '/config/rig', glob('config/rig/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -37,6 +40,14 @@ setup(
     entry_points={
         'console_scripts': [
             'pseudo_stereo = pseudo_stereo_ros.cli:main',
+            'detector = pseudo_stereo_ros.detector_node:main',
+            'fuser = pseudo_stereo_ros.fuser_node:main',
+            'virtual_camera = pseudo_stereo_ros.virtual_camera_node:main',
+            'monitor = pseudo_stereo_ros.monitor_node:main',
+            'bringup = pseudo_stereo_ros.bringup:main',
+            'bench_pipeline = pseudo_stereo_ros.node_benchmark:main',
+            'replay = pseudo_stereo_ros.replay_node:main',
+            'record = pseudo_stereo_ros.record_node:main',
         ],
     },
 )

@@ -1,0 +1,225 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Find the ball in one image: colour (or brightness) segmentation and a sub-pixel centroid.
+
+Steps: threshold (HSV range for colour images, brightness for mono8) ->
+morphological opening (removes specks) -> connected blobs within
+``[min_area_px, max_area_px]`` -> one blob (the largest, or the one nearest
+to the last detection) -> centroid by image moments of a soft weight over
+the blob and a two-pixel margin.  The weight is the pixel's chroma
+(``max - min`` of its channels; brightness for mono8) above the local
+background level, which is linear in the ball's coverage of an
+anti-aliased edge pixel, so the centroid is sub-pixel accurate.
+
+With ``search_window_px > 0`` only a square around the last detection is
+searched; when the ball is not found there, or its blob touches the window's
+edge, the full frame is searched.  Coordinates are raw pixels with pixel
+centres at integers.
+"""
+
+from collections import Counter
+from typing import Optional, Sequence, Tuple
+
+import cv2
+import numpy as np
+
+__all__ = ['BallDetector', 'CHOICES', 'COLOR_ENCODINGS', 'ENCODINGS']
+
+#: Blob choice policies.
+CHOICES = ('largest', 'nearest')
+#: Colour encodings -> OpenCV conversion to HSV (alpha, if any, is dropped first).
+COLOR_ENCODINGS = {
+    'rgb8': cv2.COLOR_RGB2HSV,
+    'bgr8': cv2.COLOR_BGR2HSV,
+    'rgba8': cv2.COLOR_RGB2HSV,
+    'bgra8': cv2.COLOR_BGR2HSV,
+}
+#: Every encoding :meth:`BallDetector.detect` accepts.
+ENCODINGS = tuple(COLOR_ENCODINGS) + ('mono8',)
+
+_MARGIN_PX = 2
+
+
+class BallDetector:
+    """
+    Ball detector with state (the last position, for the search window and the blob choice).
+
+    :param hsv_lower: lowest (H, S, V), OpenCV ranges (H 0..179, S and V 0..255); a lower hue
+        above the upper hue wraps around red
+    :param hsv_upper: highest (H, S, V)
+    :param mono_threshold: mono8 images: a ball pixel is at least this bright (0..255)
+    :param min_area_px: smallest blob area [px]
+    :param max_area_px: largest blob area [px]
+    :param open_kernel_px: size of the elliptical opening kernel [px]; 0 or 1 disables
+    :param choice: ``'largest'`` or ``'nearest'`` (to the last detection)
+    :param search_window_px: half side of the search window around the last detection [px];
+        0 always searches the full frame
+    """
+
+    def __init__(self, *, hsv_lower: Sequence[int] = (5, 120, 100),
+                 hsv_upper: Sequence[int] = (25, 255, 255), mono_threshold: int = 200,
+                 min_area_px: float = 4.0, max_area_px: float = 20000.0,
+                 open_kernel_px: int = 3, choice: str = 'largest',
+                 search_window_px: int = 48):
+        lower = [int(x) for x in hsv_lower]
+        upper = [int(x) for x in hsv_upper]
+        if len(lower) != 3 or len(upper) != 3:
+            raise ValueError('hsv_lower and hsv_upper take three values (H, S, V)')
+        for name, values in (('hsv_lower', lower), ('hsv_upper', upper)):
+            if not (0 <= values[0] <= 179 and all(0 <= x <= 255 for x in values[1:])):
+                raise ValueError(f'{name} out of range (H 0..179, S and V 0..255): {values}')
+        if lower[1] > upper[1] or lower[2] > upper[2]:
+            raise ValueError(f'hsv_lower {lower} exceeds hsv_upper {upper} in S or V')
+        if not 0 <= int(mono_threshold) <= 255:
+            raise ValueError(f'mono_threshold must be in 0..255, got {mono_threshold}')
+        if not 0 < min_area_px <= max_area_px:
+            raise ValueError(f'need 0 < min_area_px <= max_area_px, got {min_area_px}, '
+                             f'{max_area_px}')
+        if choice not in CHOICES:
+            raise ValueError(f'unknown choice {choice!r} (known: {", ".join(CHOICES)})')
+        if int(search_window_px) < 0 or int(open_kernel_px) < 0:
+            raise ValueError('search_window_px and open_kernel_px must be >= 0')
+        self._ranges = []
+        if lower[0] <= upper[0]:
+            self._ranges.append((np.array(lower, np.uint8), np.array(upper, np.uint8)))
+        else:  # hue wraps around 180
+            self._ranges.append((np.array(lower, np.uint8), np.array((179,) + tuple(upper[1:]),
+                                                                     np.uint8)))
+            self._ranges.append((np.array((0,) + tuple(lower[1:]), np.uint8),
+                                 np.array(upper, np.uint8)))
+        self.mono_threshold = int(mono_threshold)
+        self.min_area_px = float(min_area_px)
+        self.max_area_px = float(max_area_px)
+        self.choice = choice
+        self.search_window_px = int(search_window_px)
+        size = int(open_kernel_px)
+        self._kernel = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+                        if size > 1 else None)
+        self._dilate = cv2.getStructuringElement(cv2.MORPH_RECT,
+                                                 (2 * _MARGIN_PX + 1, 2 * _MARGIN_PX + 1))
+        #: The last detection (u, v) [px], or None.
+        self.last: Optional[Tuple[float, float]] = None
+        #: Counts: ``frames``, ``detections``, ``no_ball``, ``window_hits``, ``window_misses``.
+        self.stats = Counter()
+
+    def reset(self) -> None:
+        """Forget the last position."""
+        self.last = None
+
+    def detect(self, image: np.ndarray, encoding: str = 'bgr8') -> Optional[Tuple[float, float]]:
+        """
+        Find the ball.
+
+        :param image: (H, W) uint8 for mono8, (H, W, 3 or 4) uint8 in the encoding's order
+        :param encoding: one of :data:`ENCODINGS`
+        :return: the centroid (u, v) in raw pixels, or None when there is no ball
+        :raises ValueError: an unknown encoding or an image whose shape does not fit it
+        """
+        if encoding not in ENCODINGS:
+            raise ValueError(f'unsupported encoding {encoding!r} (supported: '
+                             f'{", ".join(ENCODINGS)})')
+        channels = 1 if encoding == 'mono8' else (4 if encoding.endswith('a8') else 3)
+        if image.dtype != np.uint8 or image.ndim != (2 if channels == 1 else 3) or \
+                (channels > 1 and image.shape[2] != channels):
+            raise ValueError(f'image of shape {image.shape} and type {image.dtype} does not '
+                             f'fit encoding {encoding!r}')
+        self.stats['frames'] += 1
+        height, width = image.shape[:2]
+        result = None
+        if self.last is not None and self.search_window_px > 0:
+            half = self.search_window_px
+            u, v = int(round(self.last[0])), int(round(self.last[1]))
+            x0, y0 = max(u - half, 0), max(v - half, 0)
+            x1, y1 = min(u + half + 1, width), min(v + half + 1, height)
+            if x0 < x1 and y0 < y1:
+                result = self._search(image[y0:y1, x0:x1], encoding, (x0, y0),
+                                      (x0 > 0, y0 > 0, x1 < width, y1 < height))
+            self.stats['window_hits' if result is not None else 'window_misses'] += 1
+        if result is None:
+            result = self._search(image, encoding, (0, 0), (False, False, False, False))
+        if result is None:
+            self.stats['no_ball'] += 1
+            self.last = None
+            return None
+        self.stats['detections'] += 1
+        self.last = result
+        return result
+
+    # -- steps ----------------------------------------------------------------------------------
+
+    def _mask(self, image: np.ndarray, encoding: str) -> np.ndarray:
+        if encoding == 'mono8':
+            return cv2.threshold(image, self.mono_threshold - 1, 255, cv2.THRESH_BINARY)[1]
+        if image.shape[2] == 4:
+            image = image[:, :, :3]
+        hsv = cv2.cvtColor(np.ascontiguousarray(image), COLOR_ENCODINGS[encoding])
+        mask = None
+        for lower, upper in self._ranges:
+            part = cv2.inRange(hsv, lower, upper)
+            mask = part if mask is None else cv2.bitwise_or(mask, part)
+        return mask
+
+    def _search(self, image: np.ndarray, encoding: str, offset: Tuple[int, int],
+                inner_edges: Tuple[bool, bool, bool, bool]) -> Optional[Tuple[float, float]]:
+        """Detect in ``image`` (a view of the frame at ``offset``); None if no acceptable blob."""
+        mask = self._mask(image, encoding)
+        if self._kernel is not None:
+            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._kernel)
+        count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        if count <= 1:
+            return None
+        areas = stats[1:, cv2.CC_STAT_AREA].astype(float)
+        candidates = np.flatnonzero((areas >= self.min_area_px) & (areas <= self.max_area_px))
+        if candidates.size == 0:
+            return None
+        if self.choice == 'nearest' and self.last is not None:
+            target = np.array(self.last) - offset
+            distance = np.hypot(*(centroids[1 + candidates] - target).T)
+            best = int(candidates[np.argmin(distance)]) + 1
+        else:
+            best = int(candidates[np.argmax(areas[candidates])]) + 1
+        left, top, w, h = stats[best, :4]
+        height, width = mask.shape
+        # A blob cut by an inner window edge would bias the centroid: search the full frame.
+        if (inner_edges[0] and left <= 0) or (inner_edges[1] and top <= 0) or \
+                (inner_edges[2] and left + w >= width) or \
+                (inner_edges[3] and top + h >= height):
+            return None
+        x0, y0 = max(left - _MARGIN_PX, 0), max(top - _MARGIN_PX, 0)
+        x1, y1 = min(left + w + _MARGIN_PX, width), min(top + h + _MARGIN_PX, height)
+        u, v = self._centroid(image[y0:y1, x0:x1], labels[y0:y1, x0:x1] == best)
+        if u is None:
+            u, v = centroids[best]
+            u, v = u - x0, v - y0
+        return float(u + x0 + offset[0]), float(v + y0 + offset[1])
+
+    def _centroid(self, patch: np.ndarray, blob: np.ndarray) -> tuple:
+        """Soft-weighted centroid within ``patch`` (coordinates relative to the patch)."""
+        if patch.ndim == 2:
+            signal = patch.astype(np.float32)
+        else:
+            colour = patch[:, :, :3]
+            signal = (colour.max(axis=2).astype(np.float32)
+                      - colour.min(axis=2).astype(np.float32))
+        near = cv2.dilate(blob.astype(np.uint8), self._dilate).astype(bool)
+        ring = near & ~cv2.dilate(blob.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        # Background level: the outer ring of the margin, beyond the blob's anti-aliased edge.
+        level = float(np.median(signal[ring])) if ring.any() else 0.0
+        weight = np.where(near, np.clip(signal - level, 0.0, None), 0.0).astype(np.float32)
+        moments = cv2.moments(weight)
+        if moments['m00'] <= 0:
+            return None, None
+        return moments['m10'] / moments['m00'], moments['m01'] / moments['m00']

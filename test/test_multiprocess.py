@@ -1,0 +1,155 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Multi-process tests over DDS on loopback: the console scripts as separate processes.
+
+The detector and fuser run as their own processes with a params file; this
+process publishes rendered images, records the detectors' image points and
+checks that ``/ball/position`` carries one message per shutter event, with
+the events' stamps and the positions the core ``fuse()`` (the code path of
+``pseudo_stereo track``) computes from the same image points.
+"""
+
+import os
+from pathlib import Path
+import subprocess
+import sys
+import time
+
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from pseudo_stereo_ros.fusion import fuse
+from pseudo_stereo_ros.messages import array_to_image, point_to_observation, point_to_xyz
+from pseudo_stereo_ros.rendering import BallRenderer
+from pseudo_stereo_ros.simulation import default_rig, make_scenario, shutter_stamps, truth_at
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
+
+BIN = Path(sys.executable).parent
+# Frames of 900 kB do not fit Fast DDS's default shared-memory segment (see the profile). Set at
+# import, before any test of the session creates a DDS participant; child processes inherit it.
+os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(
+    Path(__file__).resolve().parent.parent / 'config' / 'fastdds_large_images.xml'))
+
+
+def _start(args, **kwargs):
+    return subprocess.Popen([str(BIN / args[0])] + list(args[1:]), stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def _stop(processes):
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def test_detector_and_fuser_processes(tmp_path):
+    namespace = f'mp{os.getpid()}'
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**/fuser:\n  ros__parameters:\n    method: paper\n'
+                      '    reorder_window_s: 0.005\n    max_gap_s: 0.5\n'
+                      '/**/detector:\n  ros__parameters:\n    search_window_px: 48\n')
+    cameras = default_rig()
+    processes = [_start(['detector', '--ros-args', '-r', f'__ns:=/{namespace}/{c.name}',
+                         '--params-file', str(params)]) for c in cameras]
+    processes.append(_start(['fuser', '--ros-args', '-r', f'__ns:=/{namespace}',
+                             '--params-file', str(params)]))
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    points, positions = [], []
+    try:
+        node = rclpy.create_node('probe', namespace=namespace, context=context)
+        publishers = [node.create_publisher(Image, f'{c.name}/image_raw',
+                                            qos_profile_sensor_data) for c in cameras]
+        for camera in cameras:
+            node.create_subscription(
+                PointStamped, f'{camera.name}/ball/image_point',
+                lambda msg, name=camera.name: points.append(point_to_observation(msg, name)), 100)
+        node.create_subscription(PointStamped, 'ball/position',
+                                 lambda msg: positions.append(point_to_xyz(msg)), 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+
+        def spin_until(predicate, timeout_s):
+            deadline = time.monotonic() + timeout_s
+            while not predicate() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.02)
+            return predicate()
+
+        assert spin_until(lambda: all(p.get_subscription_count() for p in publishers)
+                          and node.count_publishers(f'/{namespace}/ball/position')
+                          and all(node.count_publishers(f'/{namespace}/{c.name}/ball/image_point')
+                                  for c in cameras), 30.0), 'processes did not come up'
+        spin_until(lambda: False, 1.0)  # the reliable point topics match both ends
+        scenario = make_scenario('turntable')
+        stamps = [shutter_stamps(30.0, 1.0, phase_s=i / 60.0) for i in range(2)]
+        events = sorted((int(s), i) for i, camera_stamps in enumerate(stamps)
+                        for s in camera_stamps)
+        renderers = [BallRenderer(c, radius_m=0.03, noise_std=2.0, seed=i)
+                     for i, c in enumerate(cameras)]
+        for stamp, index in events:
+            image = renderers[index].render(truth_at(scenario, [stamp])[0])
+            publishers[index].publish(array_to_image(image, 'bgr8', stamp, cameras[index].name))
+            spin_until(lambda: False, 0.012)  # paced like 2 x 30 fps, about 1.5x faster
+        spin_until(lambda: len(positions) >= len(points) - 3, 5.0)
+        spin_until(lambda: False, 0.3)
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        _stop(processes)
+    # Best-effort images on loopback: nearly every event is detected.
+    assert len(points) >= 0.9 * len(events)
+    expected, _ = fuse(cameras, points, max_gap_ns=500_000_000)
+    assert len(expected) >= len(points) - 3  # one estimate per event after warm-up
+    assert [p[0] for p in positions] == [e.stamp_ns for e in expected]
+    np.testing.assert_allclose([p[1:] for p in positions], [(e.x, e.y, e.z) for e in expected],
+                               rtol=0, atol=1e-9)
+    # And the estimates are where the ball was (detections of a 3 px ball: mm accuracy).
+    truth = truth_at(make_scenario('turntable'), [p[0] for p in positions])
+    errors = np.linalg.norm(np.array([p[1:] for p in positions]) - truth, axis=1)
+    assert np.median(errors) < 0.02
+
+
+@pytest.mark.parametrize('args, name', [
+    (['fuser', '--ros-args', '-p', 'camera_names:=[]'], 'camera_names'),
+    (['fuser', '--ros-args', '-p', 'method:=best'], 'method'),
+    (['fuser', '--ros-args', '-p', 'max_gap_s:=1'], 'max_gap_s'),
+    (['detector', '--ros-args', '-p', 'choice:=brightest'], 'choice'),
+    (['virtual_camera', '--ros-args', '-p', 'scenario:=loop'], 'scenario'),
+])
+def test_bad_parameter_stops_the_node_naming_it(args, name):
+    result = subprocess.run([str(BIN / args[0])] + args[1:] + ['-r', f'__ns:=/bad{os.getpid()}'],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert name in result.stderr
+
+
+def test_malformed_calibration_file_stops_the_node_naming_it(tmp_path):
+    bad = tmp_path / 'broken.yaml'
+    bad.write_text('camera_name: camera2\nimage_width: 640\nimage_height: [480\n')
+    result = subprocess.run(
+        [str(BIN / 'fuser'), '--ros-args', '-r', f'__ns:=/bad{os.getpid()}', '-p',
+         f'calibration_files:=[{bad}, {bad}]'], capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert 'broken.yaml' in result.stderr and 'not valid YAML' in result.stderr
