@@ -38,7 +38,13 @@ Anchor points are cached on their frames: each event triangulates once.
 partner's latest point, as if simultaneous.
 
 Observations of two cameras within ``sync_tolerance_ns`` are simultaneous
-and are triangulated directly (the paper's Section 4.4 fallback).
+and are triangulated directly (the paper's Section 4.4 fallback).  The
+tolerance never exceeds a quarter of the camera's frame period (its shortest
+interval between frames seen so far), so the 1 ms default stays a small
+fraction of a frame up to 250 fps and shrinks beyond.  With synchronized
+cameras the first observation of a pair gives the method's prediction and the
+second the direct stereo point at the same stamp, which supersedes it
+(:meth:`Fuser.process` keeps only the latter).
 
 Imperfect input: interpolation spans at most ``max_gap_ns``; data older than
 that is never used (a silent camera produces no estimates, and a camera or the
@@ -49,7 +55,8 @@ out-of-order stamps and non-finite pixels are dropped and counted in
 
 from collections import Counter
 import math
-from typing import Iterable, List, Mapping, NamedTuple, Optional, Sequence, Union
+import operator
+from typing import Iterable, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -62,8 +69,10 @@ __all__ = [
     'DROP_REASONS',
     'Estimate',
     'Fuser',
+    'FuserConfigError',
     'METHODS',
     'Observation',
+    'estimates_to_array',
     'fuse',
 ]
 
@@ -77,17 +86,24 @@ DEFAULT_MAX_GAP_NS = 100_000_000
 #: Why an observation gave no estimate (keys of :attr:`Fuser.stats`).
 DROP_REASONS = {
     'unknown_camera': 'the camera name is not one of the configured cameras',
+    'bad_stamp': 'the stamp is not an integer number of nanoseconds',
     'non_finite': 'u or v is NaN or infinite',
     'duplicate': 'same stamp as the previous observation of that camera',
     'out_of_order': 'stamp older than an observation already processed',
     'undistort_failed': 'the pixel could not be undistorted (far outside the lens model)',
     'no_partner': 'no other camera has an observation within max_gap',
     'warming_up': 'not enough recent history yet for the method',
-    'degenerate': 'parallel rays or a non-finite result',
+    'degenerate': 'parallel rays, a point behind a camera, or a non-finite result',
 }
 
 # Frames kept per camera; the method needs three, the rest absorbs short bursts of one camera.
 _HISTORY = 8
+# The sync tolerance never exceeds this fraction of the camera's frame period.
+_SYNC_PERIOD_FRACTION = 0.25
+
+
+class FuserConfigError(ValueError):
+    """A fuser option is invalid; the message names it."""
 
 
 class Observation(NamedTuple):
@@ -133,7 +149,7 @@ class _Frame:
 class _View:
     """Per-camera state: the camera, its inverse intrinsics and its recent frames."""
 
-    __slots__ = ('camera', 'name', 'center', 'k', 'frames', 'fundamental')
+    __slots__ = ('camera', 'name', 'center', 'k', 'frames', 'fundamental', 'period')
 
     def __init__(self, camera: Camera):
         self.camera = camera
@@ -145,6 +161,8 @@ class _View:
         self.frames: List[_Frame] = []
         # partner name -> F rows (plain floats) mapping this camera's ideal pixels to lines
         self.fundamental = {}
+        #: Shortest interval between two of its frames seen so far [ns] (None: not yet).
+        self.period = None
 
     def ideal_to_direction(self, iu: float, iv: float) -> tuple:
         fx, skew, cx, fy, cy = self.k
@@ -159,30 +177,35 @@ class Fuser:
     :param cameras: the calibrated cameras (a sequence, or a mapping name -> camera)
     :param method: ``'paper'`` or ``'naive'``
     :param sync_tolerance_ns: observations of two cameras closer than this are simultaneous
-    :param max_gap_ns: longest interval bridged by interpolation; older data is not used
+        [ns] (default 1 ms; never more than a quarter of the frame period)
+    :param max_gap_ns: longest interval bridged by interpolation; older data is not used [ns]
+        (default 0.1 s)
+    :raises FuserConfigError: an invalid option, naming it
     """
 
     def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
-                 method: str = 'paper', sync_tolerance_ns: int = None,
-                 max_gap_ns: int = None):
+                 method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
+                 max_gap_ns: Optional[int] = None):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
         if len(cameras) < 2:
-            raise ValueError(f'the fuser needs at least two cameras, got {len(cameras)}')
+            raise FuserConfigError(f'the fuser needs at least two cameras, got {len(cameras)}')
         names = [camera.name for camera in cameras]
         if len(set(names)) != len(names):
-            raise ValueError(f'camera names must be unique, got {names}')
+            raise FuserConfigError(f'camera names must be unique, got {names}')
         if method not in METHODS:
-            raise ValueError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
-        self.sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
-                                     else sync_tolerance_ns)
+            raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+        #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
+        self.max_sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
+                                         else sync_tolerance_ns)
+        self.sync_tolerance_ns = self.max_sync_tolerance_ns
         self.max_gap_ns = int(DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns)
         if self.sync_tolerance_ns < 0:
-            raise ValueError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
+            raise FuserConfigError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
         if self.max_gap_ns <= self.sync_tolerance_ns:
-            raise ValueError(f'max_gap_ns ({self.max_gap_ns}) must exceed sync_tolerance_ns '
-                             f'({self.sync_tolerance_ns})')
+            raise FuserConfigError(f'max_gap_ns ({self.max_gap_ns}) must exceed '
+                                   f'sync_tolerance_ns ({self.sync_tolerance_ns})')
         self.method = method
         self._views = {camera.name: _View(camera) for camera in cameras}
         for view in self._views.values():
@@ -224,7 +247,11 @@ class Fuser:
         if not (math.isfinite(u) and math.isfinite(v)):
             stats['non_finite'] += 1
             return None
-        stamp = int(stamp)
+        try:
+            stamp = operator.index(stamp)  # ints and numpy integers; floats would lose ns
+        except TypeError:
+            stats['bad_stamp'] += 1
+            return None
         frames = view.frames
         if frames and stamp <= frames[-1].stamp:
             stats['duplicate' if stamp == frames[-1].stamp else 'out_of_order'] += 1
@@ -248,6 +275,12 @@ class Fuser:
         fx, skew, cx, fy, cy = view.k
         frame = _Frame(stamp, (fx * x + skew * y + cx, fy * y + cy),
                        view.camera.direction_of(x, y))
+        if frames:
+            interval = stamp - frames[-1].stamp
+            if view.period is None or interval < view.period:
+                view.period = interval
+                self.sync_tolerance_ns = min(self.max_sync_tolerance_ns,
+                                             int(interval * _SYNC_PERIOD_FRACTION))
         frames.append(frame)
         if len(frames) > _HISTORY:
             del frames[0]
@@ -266,6 +299,31 @@ class Fuser:
             return None
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
+
+    def process(self, observations: Iterable[Observation]) -> List[Estimate]:
+        """
+        Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
+
+        Observations are sorted by stamp first (ties keep their given order), so
+        rows of a file may come in any order.  One estimate per shutter event:
+        where a synchronized pair's second observation gives the direct stereo
+        point, it supersedes the prediction made at the first.
+
+        :param observations: the observations, any order
+        :return: the estimates in stamp order
+        """
+        estimates = []
+        for observation in sorted(observations, key=lambda obs: obs.stamp_ns):
+            estimate = self.update(observation)
+            if estimate is None:
+                continue
+            if (estimate.kind == 'sync' and estimates
+                    and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
+                    and estimates[-1].camera != estimate.camera):
+                estimates[-1] = estimate
+            else:
+                estimates.append(estimate)
+        return estimates
 
     # -- methods --------------------------------------------------------------------------------
 
@@ -328,7 +386,13 @@ class Fuser:
         predicted = (p1[0] + gain * (p1[0] - p0[0]), p1[1] + gain * (p1[1] - p0[1]),
                      p1[2] + gain * (p1[2] - p0[2]))
         # Eq. 5: the nearest point on the newest observation's viewing ray.
-        return nearest_point_on_line_one(predicted, view.center, frame.direction), 'pseudo'
+        point = nearest_point_on_line_one(predicted, view.center, frame.direction)
+        center, direction = view.center, frame.direction
+        if ((point[0] - center[0]) * direction[0] + (point[1] - center[1]) * direction[1]
+                + (point[2] - center[2]) * direction[2]) <= 0.0:
+            self.stats['degenerate'] += 1  # behind the camera
+            return None
+        return point, 'pseudo'
 
     def _anchor(self, frame: _Frame, x_view: _View, y_view: _View) -> Optional[tuple]:
         """Return the Steps I-III point at ``frame`` of camera X with camera Y (cached)."""
@@ -346,8 +410,16 @@ class Fuser:
             # No Y frame after this one yet; one may come, so cache nothing. (A Y frame at the
             # same stamp is found as `before` and interpolated with weight 1 once `after` exists.)
             return None
-        if before is not None and after.stamp - before.stamp <= self.max_gap_ns:
-            # Step I: linear interpolation over stamps. For X = camera 1 at t-1 this is Eq. 1,
+        if before is None:
+            # Y's history starts after this frame: only a simultaneous Y frame can serve.
+            point = None
+            if after.stamp - stamp <= self.sync_tolerance_ns:
+                point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
+                                             after.direction)
+        else:
+            # Step I: linear interpolation over stamps (consecutive frames of a camera are never
+            # more than max_gap apart: update() clears the history of a camera that was silent
+            # longer). For X = camera 1 at t-1 this is Eq. 1,
             # (delta12 * u(t'-2) + delta21 * u(t'-1)) / (delta12 + delta21): each sample is
             # weighted by the *other* sample's distance in time.
             w_after = (stamp - before.stamp) / (after.stamp - before.stamp)
@@ -368,35 +440,23 @@ class Fuser:
             # Step III: triangulate X's ray with the ray through the corrected point.
             point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
                                          y_view.ideal_to_direction(iu, iv))
-        else:
-            # No bracket within max_gap: only a simultaneous Y frame can serve.
-            nearest = min((f for f in (before, after) if f is not None),
-                          key=lambda f: abs(f.stamp - stamp))
-            point = None
-            if abs(nearest.stamp - stamp) <= self.sync_tolerance_ns:
-                point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
-                                             nearest.direction)
         frame.anchors[y_view.name] = point
         return point
 
 
 def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
-         observations: Iterable[Observation], **options) -> tuple:
+         observations: Iterable[Observation], **options) -> Tuple[List[Estimate], Counter]:
     """
-    Run a fuser over recorded observations in stamp order.
-
-    Observations are sorted by stamp first (ties keep their given order), so
-    rows of a file may come in any order.
+    Run a new fuser over recorded observations (see :meth:`Fuser.process`).
 
     :param cameras: the calibrated cameras
     :param observations: the observations, any order
     :param options: keyword options of :class:`Fuser`
-    :return: ``(estimates, stats)``: the list of :class:`Estimate` and the fuser's counters
+    :return: ``(estimates, stats)``: the estimates in stamp order and the fuser's counters
+    :raises FuserConfigError: an invalid option
     """
     fuser = Fuser(cameras, **options)
-    ordered = sorted(observations, key=lambda obs: obs.stamp_ns)
-    estimates = [estimate for estimate in map(fuser.update, ordered) if estimate is not None]
-    return estimates, fuser.stats
+    return fuser.process(observations), fuser.stats
 
 
 def estimates_to_array(estimates: Sequence[Estimate]) -> np.ndarray:

@@ -19,11 +19,14 @@ Vectorized functions take (N, k) arrays; the ``*_one`` functions do the same
 for one point with plain floats, for the fuser's per-event path (numpy costs
 microseconds per call on 3-vectors).  Tests hold the two versions equal.
 
-Degenerate policy (see :mod:`pseudo_stereo_ros.camera`): parallel rays give
-NaN, never an exception.
+Degenerate policy (see :mod:`pseudo_stereo_ros.camera`), never an exception:
+rays that are parallel, or whose crossing point lies behind either ray's
+origin (behind a camera: ray directions point out of the camera), have no
+crossing point.  The vectorized functions return NaN rows for it, the
+``*_one`` functions None (cheaper to test per event than NaN).
 """
 
-import math
+from typing import Optional
 
 import numpy as np
 
@@ -131,7 +134,7 @@ def triangulate_rays(origin_a: np.ndarray, directions_a: np.ndarray,
     :param directions_a: (N, 3) directions (any length)
     :param origin_b: (3,) or (N, 3) ray origins [m]
     :param directions_b: (N, 3) directions (any length)
-    :return: (N, 3) points [m]; NaN rows for parallel rays
+    :return: (N, 3) points [m]; NaN rows for parallel rays or a crossing behind an origin
     """
     d1 = np.asarray(directions_a, dtype=float).reshape(-1, 3)
     d2 = np.asarray(directions_b, dtype=float).reshape(-1, 3)
@@ -149,7 +152,7 @@ def triangulate_rays(origin_a: np.ndarray, directions_a: np.ndarray,
         s = (b * e - c * d) / denominator
         t = (a * e - b * d) / denominator
         points = 0.5 * (o1 + s[:, None] * d1 + o2 + t[:, None] * d2)
-    points[parallel] = np.nan
+    points[parallel | ~(s > 0) | ~(t > 0)] = np.nan
     return points
 
 
@@ -179,8 +182,16 @@ def nearest_point_on_line(points: np.ndarray, origin: np.ndarray,
     return origin + k[:, None] * directions
 
 
-def triangulate_rays_one(o1: tuple, d1: tuple, o2: tuple, d2: tuple) -> tuple:
-    """Scalar :func:`triangulate_rays` for one pair; returns (x, y, z) or None if parallel."""
+def triangulate_rays_one(o1: tuple, d1: tuple, o2: tuple, d2: tuple) -> Optional[tuple]:
+    """
+    Return the crossing point of one pair of rays (scalar :func:`triangulate_rays`).
+
+    :param o1: origin of the first ray (3 floats) [m]
+    :param d1: its direction (3 floats)
+    :param o2: origin of the second ray [m]
+    :param d2: its direction
+    :return: (x, y, z) [m], or None for parallel rays or a crossing behind an origin
+    """
     w0, w1, w2 = o1[0] - o2[0], o1[1] - o2[1], o1[2] - o2[2]
     a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
     b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
@@ -192,20 +203,24 @@ def triangulate_rays_one(o1: tuple, d1: tuple, o2: tuple, d2: tuple) -> tuple:
         return None
     s = (b * e - c * d) / denominator
     t = (a * e - b * d) / denominator
+    if not (s > 0.0 and t > 0.0):
+        return None
     return (0.5 * (o1[0] + s * d1[0] + o2[0] + t * d2[0]),
             0.5 * (o1[1] + s * d1[1] + o2[1] + t * d2[1]),
             0.5 * (o1[2] + s * d1[2] + o2[2] + t * d2[2]))
 
 
 def nearest_point_on_line_one(point: tuple, origin: tuple, direction: tuple) -> tuple:
-    """Scalar :func:`nearest_point_on_line` for one point; returns (x, y, z)."""
+    """
+    Return the nearest point on one line to a point (scalar :func:`nearest_point_on_line`).
+
+    :param point: the point (3 floats) [m]
+    :param origin: a point of the line [m]
+    :param direction: the line's direction (nonzero)
+    :return: (x, y, z) [m]
+    """
     k = ((point[0] - origin[0]) * direction[0] + (point[1] - origin[1]) * direction[1]
          + (point[2] - origin[2]) * direction[2]) / (
         direction[0] * direction[0] + direction[1] * direction[1] + direction[2] * direction[2])
     return (origin[0] + k * direction[0], origin[1] + k * direction[1],
             origin[2] + k * direction[2])
-
-
-def is_finite_point(point: tuple) -> bool:
-    """Return True when every coordinate of a point is a finite float."""
-    return point is not None and all(math.isfinite(x) for x in point)

@@ -97,10 +97,14 @@ def test_scalar_and_vectorized_versions_agree():
     o1, o2 = rng.normal(size=3), rng.normal(size=3)
     d1, d2 = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     vectorized = triangulate_rays(o1, d1, o2, d2)
+    crossing = np.isfinite(vectorized[:, 0])
+    assert 5 < crossing.sum() < 45  # random rays cross in front of both origins, or not
     for k in range(50):
-        np.testing.assert_allclose(triangulate_rays_one(tuple(o1), tuple(d1[k]), tuple(o2),
-                                                        tuple(d2[k])), vectorized[k],
-                                   rtol=1e-9, atol=1e-12)
+        scalar = triangulate_rays_one(tuple(o1), tuple(d1[k]), tuple(o2), tuple(d2[k]))
+        if crossing[k]:
+            np.testing.assert_allclose(scalar, vectorized[k], rtol=1e-9, atol=1e-12)
+        else:
+            assert scalar is None
     points = rng.normal(size=(50, 3))
     feet = nearest_point_on_line(points, o1, d1)
     for k in range(50):
@@ -118,6 +122,10 @@ def test_degenerate_policy_is_nan():
     # Parallel rays have no crossing point.
     assert np.all(np.isnan(triangulate_rays((0, 0, 0), [(1, 0, 0)], (0, 1, 0), [(2, 0, 0)])))
     assert triangulate_rays_one((0, 0, 0), (1, 0, 0), (0, 1, 0), (2, 0, 0)) is None
+    # Rays that cross behind an origin: the crossing (-1, 0, 0) is behind the first ray.
+    assert np.all(np.isnan(triangulate_rays((0, 0, 0), [(1, 0, 0)], (0, 1, 0), [(-1, -1, 0)])))
+    assert triangulate_rays_one((0, 0, 0), (1, 0, 0), (0, 1, 0), (-1, -1, 0)) is None
+    assert triangulate_rays_one((0, 0, 0), (-1, 0, 0), (0, 1, 0), (-1, -1, 0)) is not None
     # A point behind the camera does not project.
     camera, _ = rig()
     behind = 2 * camera.center - np.array((1.5, 1.0, 1.0))
