@@ -73,7 +73,10 @@ class FuserNode(Node):
         gap_s = declare(self, 'max_gap_s', 0.1,
                         'longest interval bridged; older data is not used (stale camera) [s]',
                         min_value=0.0, read_only=True)
-        window_s = declare(self, 'reorder_window_s', 0.002,
+        # 0 by default: every point is fused the moment it arrives (lowest latency); a point
+        # older than one already fused is dropped and counted. Raise it when the detectors'
+        # latencies differ by more than the cameras' phase.
+        window_s = declare(self, 'reorder_window_s', 0.0,
                            'longest hold of a point to restore stamp order across topics [s]',
                            min_value=0.0, max_value=1.0, read_only=True)
         trail_length = declare(self, 'trail_length', 120,

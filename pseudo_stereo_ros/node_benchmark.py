@@ -20,7 +20,7 @@ Prints, as median and 90th percentile:
 1. the detector core per 640x480 frame, full frame and with the search window
    (paper: 2.6 ms image analysis);
 2. the fuser node from receiving an image point to publishing its estimate
-   (in-process, reorder window 0);
+   (in-process, reorder window 0, the default);
 3. end to end on loopback, image stamp to ``/ball/position``: the
    ``detector`` (one per camera) and ``fuser`` console scripts run as
    separate processes; this process publishes rendered images stamped with
