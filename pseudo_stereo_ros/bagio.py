@@ -20,7 +20,11 @@ A bag (a rosbag2 directory, or a bare ``.mcap`` / ``.db3`` file) carries one
 camera (``point.x`` = u, ``point.y`` = v in raw pixels, header stamp = the
 shutter stamp) and, written by :func:`write_estimates`, ``/ball/position``
 (metres, in ``frame_id``).  Stamps are integer nanoseconds
-(``sec * 10**9 + nanosec``) everywhere.
+(``sec * 10**9 + nanosec``) everywhere.  Camera images
+(``sensor_msgs/msg/Image`` on ``/<camera>/image_raw``) are read as arrays by
+:func:`read_images` through the core's
+:func:`~pseudo_stereo_ros.detection.image_array`, the function the detector
+node uses too; :func:`write_messages` writes any mix of points and images.
 
 Everything that can go wrong with a bag a user hands in (no such file, not a
 bag, truncated or corrupt, a missing topic, a topic of another type, no
@@ -33,21 +37,36 @@ from pathlib import Path
 import re
 from typing import Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
+import numpy as np
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
 from rosbags.typesys import get_typestore, Stores
 
+from .detection import EncodingError, image_array
+
+try:
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode
+except ImportError:  # rosbags < 0.11 nests them in Writer
+    CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
 from .fusion import Estimate, Observation
 
 __all__ = [
     'BagError',
+    'GROUND_TRUTH_TOPIC',
     'IMAGE_POINT_TYPE',
+    'IMAGE_TYPE',
     'POSITION_TOPIC',
     'bag_cameras',
+    'bag_topics',
+    'image_message',
     'image_point_topic',
+    'image_topic',
     'iter_raw',
+    'point_message',
+    'read_images',
     'read_observations',
     'read_positions',
     'write_estimates',
+    'write_messages',
     'write_observations',
     'write_points',
 ]
@@ -58,6 +77,10 @@ PathLike = Union[str, os.PathLike]
 IMAGE_POINT_TYPE = 'geometry_msgs/msg/PointStamped'
 #: Topic of the fused 3D positions.
 POSITION_TOPIC = '/ball/position'
+#: Message type of camera images.
+IMAGE_TYPE = 'sensor_msgs/msg/Image'
+#: Topic of the true ball position of a simulation (PointStamped, metres).
+GROUND_TRUTH_TOPIC = '/ball/ground_truth'
 
 _IMAGE_POINT_RE = re.compile(r'^/([A-Za-z_][A-Za-z0-9_]*)/ball/image_point$')
 _STORAGE = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
@@ -86,6 +109,11 @@ def image_point_topic(camera: str) -> str:
     return f'/{camera}/ball/image_point'
 
 
+def image_topic(camera: str) -> str:
+    """Return the image topic of a camera: ``/<camera>/image_raw``."""
+    return f'/{camera}/image_raw'
+
+
 def _open(path: PathLike) -> Reader:
     path = Path(path)
     if not path.exists():
@@ -106,6 +134,20 @@ def _reason(err: BaseException) -> str:
 def _topics(reader: Reader) -> Dict[str, str]:
     """Return topic -> message type (each topic once)."""
     return {connection.topic: connection.msgtype for connection in reader.connections}
+
+
+def bag_topics(path: PathLike) -> Dict[str, str]:
+    """
+    Return the topics of a bag and their message types.
+
+    :param path: the bag (directory, ``.mcap`` or ``.db3``)
+    :return: topic -> type name such as ``'geometry_msgs/msg/PointStamped'``
+    """
+    reader = _open(path)
+    try:
+        return _topics(reader)
+    finally:
+        reader.close()
 
 
 def bag_cameras(path: PathLike) -> List[str]:
@@ -157,15 +199,15 @@ def iter_raw(path: PathLike, topics: Optional[Sequence[str]] = None
             pass
 
 
-def _read_points(path: PathLike, topics: Sequence[str]) -> Iterator[Tuple[str, object]]:
-    """Yield ``(topic, PointStamped)`` of the given topics, checking their type."""
+def _read_messages(path: PathLike, topics: Sequence[str], expected: str = IMAGE_POINT_TYPE
+                   ) -> Iterator[Tuple[str, object]]:
+    """Yield ``(topic, message)`` of the given topics, checking their type."""
     store = typestore()
     checked = set()
     for topic, msgtype, _, data in iter_raw(path, topics):
         if topic not in checked:
-            if msgtype != IMAGE_POINT_TYPE:
-                raise BagError(f'{path}: topic {topic} has type {msgtype}, '
-                               f'expected {IMAGE_POINT_TYPE}')
+            if msgtype != expected:
+                raise BagError(f'{path}: topic {topic} has type {msgtype}, expected {expected}')
             checked.add(topic)
         try:
             msg = store.deserialize_cdr(data, msgtype)
@@ -175,8 +217,9 @@ def _read_points(path: PathLike, topics: Sequence[str]) -> Iterator[Tuple[str, o
         yield topic, msg
 
 
-def _check_types(path: PathLike, topics: Sequence[str]) -> None:
-    """Raise BagError when a topic is missing or not a PointStamped (before reading data)."""
+def _check_types(path: PathLike, topics: Sequence[str], expected: str = IMAGE_POINT_TYPE
+                 ) -> None:
+    """Raise BagError when a topic is missing or not of the expected type (before reading)."""
     reader = _open(path)
     try:
         available = _topics(reader)
@@ -186,9 +229,9 @@ def _check_types(path: PathLike, topics: Sequence[str]) -> None:
         if topic not in available:
             raise BagError(f'{path}: no topic {topic} (the bag has: '
                            f'{", ".join(sorted(available)) or "no topics"})')
-        if available[topic] != IMAGE_POINT_TYPE:
+        if available[topic] != expected:
             raise BagError(f'{path}: topic {topic} has type {available[topic]}, '
-                           f'expected {IMAGE_POINT_TYPE}')
+                           f'expected {expected}')
 
 
 def _stamp_ns(msg) -> int:
@@ -214,7 +257,7 @@ def read_observations(path: PathLike, cameras: Optional[Sequence[str]] = None
     _check_types(path, list(by_topic))
     observations = [Observation(by_topic[topic], _stamp_ns(msg), float(msg.point.x),
                                 float(msg.point.y))
-                    for topic, msg in _read_points(path, list(by_topic))]
+                    for topic, msg in _read_messages(path, list(by_topic))]
     if not observations:
         raise BagError(f'{path}: no messages on {", ".join(by_topic)}')
     return observations
@@ -231,18 +274,110 @@ def read_positions(path: PathLike, topic: str = POSITION_TOPIC) -> List[Tuple[in
     """
     _check_types(path, [topic])
     return [(_stamp_ns(msg), float(msg.point.x), float(msg.point.y), float(msg.point.z))
-            for _, msg in _read_points(path, [topic])]
+            for _, msg in _read_messages(path, [topic])]
 
 
-def _point_stamped(stamp_ns: int, frame_id: str, x: float, y: float, z: float):
-    store = typestore()
-    types = store.types
+def read_images(path: PathLike, topic: str
+                ) -> Iterator[Tuple[int, str, Optional[np.ndarray], Optional[str]]]:
+    """
+    Read an image topic as arrays, one message at a time (a bag of images can be large).
+
+    :param path: the bag
+    :param topic: a ``sensor_msgs/msg/Image`` topic, e.g. ``/camera1/image_raw``
+    :return: an iterator of ``(stamp_ns, encoding, pixels, problem)`` in log-time order:
+        ``pixels`` as :func:`~pseudo_stereo_ros.detection.image_array` returns them and
+        ``problem`` None, or ``pixels`` None and ``problem`` saying why the image is unusable
+        (an unsupported encoding, a buffer that does not fit its size): the caller skips it,
+        as the detector node drops such an image
+    :raises BagError: the topic is missing or not an Image, or the bag is damaged
+    """
+    _check_types(path, [topic], IMAGE_TYPE)
+    for _, msg in _read_messages(path, [topic], IMAGE_TYPE):
+        try:
+            pixels = image_array(msg.data, msg.height, msg.width, msg.step, msg.encoding)
+        except EncodingError as err:
+            yield _stamp_ns(msg), str(msg.encoding), None, str(err)
+            continue
+        yield _stamp_ns(msg), str(msg.encoding), pixels, None
+
+
+def _header(stamp_ns: int, frame_id: str):
+    types = typestore().types
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     stamp = types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec)
-    header = types['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id)
+    return types['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id)
+
+
+def point_message(stamp_ns: int, frame_id: str, x: float, y: float, z: float):
+    """
+    Return a rosbags ``geometry_msgs/msg/PointStamped`` for :func:`write_messages`.
+
+    :param stamp_ns: header stamp [ns]
+    :param frame_id: header frame
+    :param x: point.x
+    :param y: point.y
+    :param z: point.z
+    :return: the message object
+    """
+    types = typestore().types
     point = types['geometry_msgs/msg/Point'](x=float(x), y=float(y), z=float(z))
-    return store.serialize_cdr(types[IMAGE_POINT_TYPE](header=header, point=point),
-                               IMAGE_POINT_TYPE)
+    return types[IMAGE_POINT_TYPE](header=_header(stamp_ns, frame_id), point=point)
+
+
+def image_message(stamp_ns: int, frame_id: str, pixels: np.ndarray, encoding: str = 'bgr8'):
+    """
+    Return a rosbags ``sensor_msgs/msg/Image`` (rows unpadded) for :func:`write_messages`.
+
+    :param stamp_ns: header stamp [ns] (the shutter time)
+    :param frame_id: the camera's optical frame
+    :param pixels: (H, W) or (H, W, C) uint8 in the encoding's channel order
+    :param encoding: an encoding of :data:`~pseudo_stereo_ros.detection.ENCODING_CHANNELS`
+    :return: the message object
+    """
+    pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
+    height, width = pixels.shape[:2]
+    channels = 1 if pixels.ndim == 2 else pixels.shape[2]
+    image_array(pixels.reshape(-1), height, width, width * channels, encoding)  # checks
+    return typestore().types[IMAGE_TYPE](
+        header=_header(stamp_ns, frame_id), height=height, width=width, encoding=encoding,
+        is_bigendian=0, step=width * channels, data=pixels.reshape(-1))
+
+
+def write_messages(path: PathLike, messages: Iterable[Tuple[str, str, int, object]], *,
+                   storage: str = 'mcap', compress: bool = False) -> int:
+    """
+    Write messages to a new bag.
+
+    :param path: the bag directory to create (must not exist)
+    :param messages: ``(topic, msgtype, log_time_ns, message)`` in log-time order, messages as
+        built by :func:`point_message` and :func:`image_message` (any rosbags message object)
+    :param storage: ``'mcap'`` or ``'sqlite3'``
+    :param compress: zstd-compress the whole storage file (rosbag2 file compression); a bag
+        of images with a static background shrinks a hundredfold
+    :return: the number of messages written
+    """
+    if storage not in _STORAGE:
+        raise BagError(f'{path}: unknown storage {storage!r} (known: {", ".join(_STORAGE)})')
+    path = Path(path)
+    if path.exists():
+        raise BagError(f'{path}: exists already, not overwriting')
+    store = typestore()
+    count = 0
+    try:
+        bag = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=_STORAGE[storage])
+        if compress:
+            bag.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+        with bag:
+            connections = {}
+            for topic, msgtype, log_time, message in messages:
+                if topic not in connections:
+                    connections[topic] = bag.add_connection(topic, msgtype, typestore=store)
+                bag.write(connections[topic], int(log_time),
+                          store.serialize_cdr(message, msgtype))
+                count += 1
+    except (WriterError, OSError) as err:
+        raise BagError(f'{path}: cannot write the bag ({_reason(err)})') from err
+    return count
 
 
 def write_points(path: PathLike, rows: Iterable[Tuple[str, int, str, float, float, float]], *,
@@ -255,24 +390,10 @@ def write_points(path: PathLike, rows: Iterable[Tuple[str, int, str, float, floa
     :param storage: ``'mcap'`` or ``'sqlite3'``
     :return: the number of messages written
     """
-    if storage not in _STORAGE:
-        raise BagError(f'{path}: unknown storage {storage!r} (known: {", ".join(_STORAGE)})')
     rows = sorted(rows, key=lambda row: row[1])
-    path = Path(path)
-    if path.exists():
-        raise BagError(f'{path}: exists already, not overwriting')
-    try:
-        with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=_STORAGE[storage]) as bag:
-            connections = {}
-            for topic, stamp, frame_id, x, y, z in rows:
-                if topic not in connections:
-                    connections[topic] = bag.add_connection(topic, IMAGE_POINT_TYPE,
-                                                            typestore=typestore())
-                bag.write(connections[topic], int(stamp),
-                          _point_stamped(int(stamp), frame_id, x, y, z))
-    except (WriterError, OSError) as err:
-        raise BagError(f'{path}: cannot write the bag ({_reason(err)})') from err
-    return len(rows)
+    return write_messages(path, ((topic, IMAGE_POINT_TYPE, int(stamp),
+                                  point_message(int(stamp), frame_id, x, y, z))
+                                 for topic, stamp, frame_id, x, y, z in rows), storage=storage)
 
 
 def write_observations(path: PathLike, observations: Iterable[Observation], *,

@@ -28,6 +28,10 @@ With ``search_window_px > 0`` only a square around the last detection is
 searched; when the ball is not found there, or its blob touches the window's
 edge, the full frame is searched.  Coordinates are raw pixels with pixel
 centres at integers.
+
+:func:`image_array` turns the raw buffer of an image (the fields of a
+``sensor_msgs/Image``, from rclpy or from a bag) into the array
+:meth:`BallDetector.detect` takes; it knows no ROS type.
 """
 
 from collections import Counter
@@ -36,7 +40,8 @@ from typing import Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-__all__ = ['BallDetector', 'CHOICES', 'COLOR_ENCODINGS', 'ENCODINGS']
+__all__ = ['BallDetector', 'CHOICES', 'COLOR_ENCODINGS', 'ENCODING_CHANNELS', 'ENCODINGS',
+           'EncodingError', 'image_array']
 
 #: Blob choice policies.
 CHOICES = ('largest', 'nearest')
@@ -49,8 +54,48 @@ COLOR_ENCODINGS = {
 }
 #: Every encoding :meth:`BallDetector.detect` accepts.
 ENCODINGS = tuple(COLOR_ENCODINGS) + ('mono8',)
+#: Supported image encodings -> channels per pixel (all 8 bits per channel).
+ENCODING_CHANNELS = {'mono8': 1, 'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4}
 
 _MARGIN_PX = 2
+
+
+class EncodingError(ValueError):
+    """An image has an unsupported encoding or inconsistent size fields."""
+
+
+def image_array(data, height: int, width: int, step: int, encoding: str) -> np.ndarray:
+    """
+    Return the pixels of a raw 8-bit image buffer as an array (a view where possible).
+
+    Rows may be padded (``step > width * channels``); the padding is dropped.
+
+    :param data: the pixel bytes (bytes, a uint8 array, ``array.array('B')``, ...), row-major
+    :param height: rows [px]
+    :param width: columns [px]
+    :param step: bytes per row, padding included
+    :param encoding: one of :data:`ENCODING_CHANNELS`
+    :return: (H, W) uint8 for mono8, (H, W, C) uint8 in the encoding's channel order
+    :raises EncodingError: unsupported encoding, or ``step``/``data`` inconsistent with the size
+    """
+    channels = ENCODING_CHANNELS.get(encoding)
+    if channels is None:
+        raise EncodingError(f'unsupported image encoding {encoding!r} '
+                            f'(supported: {", ".join(ENCODING_CHANNELS)})')
+    height, width, step = int(height), int(width), int(step)
+    if height < 0 or width < 0:
+        raise EncodingError(f'negative image size {width} x {height}')
+    row_bytes = width * channels
+    if step < row_bytes:
+        raise EncodingError(f'step {step} is less than width x channels = {row_bytes}')
+    buffer = np.frombuffer(data, dtype=np.uint8)
+    if buffer.size < step * height:
+        raise EncodingError(f'data has {buffer.size} bytes, expected step x height = '
+                            f'{step * height}')
+    rows = buffer[:step * height].reshape(height, step)[:, :row_bytes]
+    if channels == 1:
+        return rows
+    return rows.reshape(height, width, channels)
 
 
 class BallDetector:

@@ -36,6 +36,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
 from .calibration import CameraCalibration
+from .detection import ENCODING_CHANNELS, EncodingError, image_array
 from .fusion import Estimate, Observation
 
 __all__ = [
@@ -57,9 +58,6 @@ __all__ = [
     'trail_marker',
 ]
 
-#: Supported image encodings -> channels per pixel (all 8 bits per channel).
-ENCODING_CHANNELS = {'mono8': 1, 'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4}
-
 _NS_PER_S = 1_000_000_000
 
 #: Diagnostic level names -> DiagnosticStatus level bytes.
@@ -69,10 +67,6 @@ _LEVELS = {
     'error': DiagnosticStatus.ERROR,
     'stale': DiagnosticStatus.STALE,
 }
-
-
-class EncodingError(ValueError):
-    """An image has an unsupported encoding or inconsistent size fields."""
 
 
 # -- time -----------------------------------------------------------------------------------------
@@ -159,23 +153,7 @@ def image_to_array(msg: Image) -> np.ndarray:
     :return: (H, W) uint8 for mono8, (H, W, C) uint8 in the encoding's channel order
     :raises EncodingError: unsupported encoding, or ``step``/``data`` inconsistent with the size
     """
-    encoding = msg.encoding
-    channels = ENCODING_CHANNELS.get(encoding)
-    if channels is None:
-        raise EncodingError(f'unsupported image encoding {encoding!r} '
-                            f'(supported: {", ".join(ENCODING_CHANNELS)})')
-    height, width, step = int(msg.height), int(msg.width), int(msg.step)
-    row_bytes = width * channels
-    if step < row_bytes:
-        raise EncodingError(f'step {step} is less than width x channels = {row_bytes}')
-    buffer = np.frombuffer(msg.data, dtype=np.uint8)
-    if buffer.size < step * height:
-        raise EncodingError(f'data has {buffer.size} bytes, expected step x height = '
-                            f'{step * height}')
-    rows = buffer[:step * height].reshape(height, step)[:, :row_bytes]
-    if channels == 1:
-        return rows
-    return rows.reshape(height, width, channels)
+    return image_array(msg.data, msg.height, msg.width, msg.step, msg.encoding)
 
 
 def array_to_image(pixels: np.ndarray, encoding: str, stamp_ns: int,
