@@ -108,12 +108,18 @@ def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.
             except (TypeError, ValueError):
                 raise _fail(source, key,
                             f'rows/cols are not integers: {rows!r}, {cols!r}') from None
+            expected = shape if len(shape) == 2 else None
+            if expected is not None and declared != expected:
+                raise _fail(source, key, f'expected {expected[0]}x{expected[1]}, declared '
+                                         f'rows x cols = {declared[0]}x{declared[1]}')
             if not isinstance(values, list) or len(values) != declared[0] * declared[1]:
                 count = len(values) if isinstance(values, list) else 'no list of'
                 raise _fail(source, key, f'rows x cols = {declared[0]}x{declared[1]} '
                                          f'but data has {count} values')
     else:
         values = value
+    if any(isinstance(x, (bool, str)) for x in np.ravel(np.array(values, dtype=object))):
+        raise _fail(source, key, 'not a numeric matrix (holds a boolean or a string)')
     try:
         array = np.array(values, dtype=float)
     except (TypeError, ValueError) as err:
@@ -157,6 +163,8 @@ def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
     if 'camera_name' not in data or data['camera_name'] is None:
         raise _fail(source, 'camera_name', 'missing')
     name = raw_name if raw_name is not None else data['camera_name']
+    if not isinstance(name, (str, int, float)) or isinstance(name, bool):
+        raise _fail(source, 'camera_name', f'expected a name, got {name!r}')
     if isinstance(name, float) and name.is_integer():
         name = int(name)
     name = str(name).strip()

@@ -61,19 +61,24 @@ def _rows(path, columns: Sequence[str]):
     """Yield (line number, row dict) of a CSV file with the required columns."""
     source = os.fspath(path)
     try:
-        stream = open(path, newline='', encoding='utf-8')
+        # utf-8-sig: a byte-order mark (spreadsheet exports) is not part of the first column.
+        stream = open(path, newline='', encoding='utf-8-sig')
     except OSError as err:
         raise CsvError(f'{source}: cannot read: {err.strerror}') from err
     with stream:
         reader = csv.DictReader(stream)
-        header = [name.strip() for name in (reader.fieldnames or [])]
-        missing = [name for name in columns if name not in header]
-        if missing:
-            raise CsvError(f'{source}:1: missing column(s) {", ".join(missing)} '
-                           f'(expected header {",".join(columns)})')
-        reader.fieldnames = header
-        for row in reader:
-            yield source, reader.line_num, row
+        try:
+            header = [name.strip() for name in (reader.fieldnames or [])]
+            missing = [name for name in columns if name not in header]
+            if missing:
+                raise CsvError(f'{source}:1: missing column(s) {", ".join(missing)} '
+                               f'(expected header {",".join(columns)})')
+            reader.fieldnames = header
+            for row in reader:
+                yield source, reader.line_num, row
+        except (UnicodeDecodeError, csv.Error) as err:
+            raise CsvError(f'{source}:{reader.line_num + 1}: not a UTF-8 CSV file '
+                           f'({err})') from err
 
 
 def _int(text: str, source: str, line: int, column: str) -> int:
@@ -126,18 +131,34 @@ def read_estimates(path) -> List[Estimate]:
 
 
 def read_truth(path) -> tuple:
-    """Read a truth CSV; return ((N,) int64 stamps [ns], (N, 3) positions [m])."""
-    stamps, points = [], []
+    """
+    Read a truth CSV (``stamp_ns,x,y,z``, rows in any order).
+
+    :param path: the file
+    :return: ((N,) int64 stamps [ns] sorted, (N, 3) positions [m])
+    :raises CsvError: naming the file, line and reason (also for a repeated stamp)
+    """
+    rows = {}
     for source, line, row in _rows(path, TRUTH_COLUMNS):
-        stamps.append(_int(row['stamp_ns'], source, line, 'stamp_ns'))
-        points.append([_float(row[c], source, line, c) for c in 'xyz'])
-    return np.array(stamps, dtype=np.int64), np.array(points, dtype=float).reshape(-1, 3)
+        stamp = _int(row['stamp_ns'], source, line, 'stamp_ns')
+        if stamp in rows:
+            raise CsvError(f'{source}:{line}: stamp {stamp} repeated')
+        rows[stamp] = [_float(row[c], source, line, c) for c in 'xyz']
+    stamps = sorted(rows)
+    return (np.array(stamps, dtype=np.int64),
+            np.array([rows[s] for s in stamps], dtype=float).reshape(-1, 3))
 
 
 def _write_atomically(path, header: Sequence[str], rows: Iterable[Sequence]) -> None:
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.', suffix='.tmp')
+    if path.is_dir():
+        raise CsvError(f'{path}: is a directory, not a file to write')
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
+                                             suffix='.tmp')
+    except OSError as err:
+        raise CsvError(f'{path}: cannot write: {err.strerror}') from err
     try:
         with os.fdopen(handle, 'w', newline='', encoding='utf-8') as stream:
             writer = csv.writer(stream, lineterminator='\n')

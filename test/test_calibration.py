@@ -116,6 +116,9 @@ def _set(key, value):
      'distortion_coefficients', 'takes 4 or 5'),
     (lambda d: d['camera_matrix'].update(rows=2), 'camera_matrix', 'rows x cols'),
     (_set('image_height', -5), 'image_height', 'positive integer'),
+    (_set('camera_name', ['a', 'b']), 'camera_name', 'expected a name'),
+    (lambda d: d['camera_matrix']['data'].__setitem__(1, True), 'camera_matrix', 'boolean'),
+    (lambda d: d['camera_matrix'].update(rows=9, cols=1), 'camera_matrix', 'expected 3x3'),
     (lambda d: d['camera_matrix']['data'].__setitem__(0, -10.0), 'camera_matrix', 'focal'),
 ])
 def test_malformed_file_names_file_key_and_reason(tmp_path, edit, key, reason):

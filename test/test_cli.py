@@ -87,3 +87,46 @@ def test_console_entry_point_runs():
     assert result.returncode == 0
     for command in ('table1', 'simulate', 'track', 'bench'):
         assert command in result.stdout
+
+
+def test_bad_option_values_exit_2(tmp_path, capsys):
+    status, output = track(tmp_path, GOOD, '--max-gap', 'inf')
+    assert status == 2 and 'finite' in capsys.readouterr().err and not output.exists()
+    assert main(['simulate', '--scenario', 'straight', '--noise', 'nan', '--out',
+                 str(tmp_path / 's')]) == 2
+    assert '--noise' in capsys.readouterr().err
+    assert main(['table1', '--noise', '-1', '--out', str(tmp_path / 't')]) == 2
+
+
+def test_unwritable_output_exits_2(tmp_path, capsys):
+    observations = tmp_path / 'obs.csv'
+    observations.write_text(GOOD)
+    status = main(['track', *CAMERAS, '--input', str(observations), '--output', str(tmp_path)])
+    assert status == 2 and 'is a directory' in capsys.readouterr().err
+
+
+def test_encodings(tmp_path, capsys):
+    # A byte-order mark (spreadsheet export) is fine; bytes that are not UTF-8 are an error.
+    observations = tmp_path / 'obs.csv'
+    observations.write_bytes(b'\xef\xbb\xbf' + GOOD.encode())
+    assert main(['track', *CAMERAS, '--input', str(observations), '--output',
+                 str(tmp_path / 'e.csv')]) == 0
+    observations.write_bytes(GOOD.encode() + b'1700000000033333333,camera1,\xff\xfe,2\n')
+    assert main(['track', *CAMERAS, '--input', str(observations), '--output',
+                 str(tmp_path / 'f.csv')]) == 2
+    assert 'not a UTF-8 CSV' in capsys.readouterr().err
+    assert not (tmp_path / 'f.csv').exists()
+
+
+def test_truth_in_any_order_and_a_mismatch_writes_nothing(tmp_path, capsys):
+    assert main(['simulate', '--scenario', 'straight', '--out', str(tmp_path)]) == 0
+    lines = (tmp_path / 'truth.csv').read_text().splitlines()
+    shuffled = tmp_path / 'shuffled.csv'
+    shuffled.write_text('\n'.join([lines[0]] + lines[:0:-1]) + '\n')
+    args = ['track', '--camera', f'camera1={tmp_path / "camera1.yaml"}', '--camera',
+            f'camera2={tmp_path / "camera2.yaml"}', '--input', str(tmp_path / 'observations.csv')]
+    assert main(args + ['--output', str(tmp_path / 'a.csv'), '--truth', str(shuffled)]) == 0
+    shuffled.write_text('\n'.join(lines[:5]) + '\n')  # truth of the first stamps only
+    assert main(args + ['--output', str(tmp_path / 'b.csv'), '--truth', str(shuffled)]) == 2
+    assert 'no ground truth' in capsys.readouterr().err
+    assert not (tmp_path / 'b.csv').exists()

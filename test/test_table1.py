@@ -48,11 +48,12 @@ def test_proposed_outputs_at_every_shutter_event(table):
         assert len(estimates) == len(data.observations) - 3
 
 
-@pytest.mark.parametrize('scenario, label, column',
-                         [('straight', 'proposed*', 'straight'),
-                          ('bounce', 'unsynchronized', 'non-uniform')])
-def test_track_on_simulate_output_matches_table1(tmp_path, table, scenario, label, column):
-    delta = '0.011111111111111112' if label == 'proposed*' else '0.016666666666666666'
+@pytest.mark.parametrize('scenario, label, column, delta',
+                         [('straight', 'proposed*', 'straight', '0.011111111111111112'),
+                          ('bounce', 'unsynchronized', 'non-uniform', '0.016666666666666666'),
+                          ('spiral', 'synchronized 30', 'spiral', '0')])
+def test_track_on_simulate_output_matches_table1(tmp_path, table, scenario, label, column,
+                                                 delta):
     method = 'naive' if label == 'unsynchronized' else 'paper'
     assert main(['simulate', '--scenario', scenario, '--delta12', delta, '--out',
                  str(tmp_path)]) == 0

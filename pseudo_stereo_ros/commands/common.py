@@ -15,12 +15,14 @@
 """Argument helpers shared by the subcommands."""
 
 import argparse
+import math
 from typing import Dict, Sequence
 
 from . import UsageError
 from ..camera import Camera
 
-__all__ = ['add_camera_argument', 'cameras_from_args', 'positive', 'seconds_to_ns']
+__all__ = ['add_camera_argument', 'cameras_from_args', 'check_pixel_options', 'positive',
+           'seconds_to_ns']
 
 
 def add_camera_argument(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
@@ -56,14 +58,23 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Dict[str, C
 
 def seconds_to_ns(value: float, option: str) -> int:
     """Convert a non-negative duration option in seconds to integer nanoseconds."""
-    if not value >= 0:
-        raise UsageError(f'{option}: must be a non-negative number of seconds, got {value}')
+    if not (value >= 0 and math.isfinite(value)):
+        raise UsageError(f'{option}: must be a finite, non-negative number of seconds, '
+                         f'got {value}')
     return int(round(value * 1e9))
+
+
+def check_pixel_options(args) -> None:
+    """Check ``--noise`` and ``--quantization`` (finite, >= 0 pixels)."""
+    for option in ('noise', 'quantization'):
+        value = getattr(args, option)
+        if not (value >= 0 and math.isfinite(value)):
+            raise UsageError(f'--{option}: must be a finite number of pixels >= 0, got {value}')
 
 
 def positive(text: str) -> float:
     """Parse a positive float for argparse."""
     value = float(text)
-    if not value > 0:
+    if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f'must be positive, got {text}')
     return value

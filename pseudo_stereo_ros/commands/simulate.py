@@ -17,7 +17,7 @@
 from pathlib import Path
 
 from . import UsageError
-from .common import positive
+from .common import check_pixel_options, positive
 from ..calibration import save_calibration
 from ..csv_io import write_observations, write_truth
 from ..experiments import Run, simulate_run
@@ -46,8 +46,9 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     """Run the command."""
-    if args.noise < 0 or args.quantization < 0 or not 0 <= args.dropout < 1:
-        raise UsageError('--noise and --quantization must be >= 0 and --dropout in [0, 1)')
+    check_pixel_options(args)
+    if not 0 <= args.dropout < 1:
+        raise UsageError(f'--dropout must be in [0, 1), got {args.dropout}')
     if not 0 <= args.delta12 < 1.0 / args.fps:
         raise UsageError(f'--delta12 must be in [0, 1/fps = {1.0 / args.fps:.6g}) s')
     cameras = default_rig()

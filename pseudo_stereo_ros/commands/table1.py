@@ -16,6 +16,7 @@
 
 from pathlib import Path
 
+from .common import check_pixel_options
 from ..experiments import format_table1, plot_figure6, run_table1
 from ..simulation import default_rig
 
@@ -35,8 +36,12 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     """Run the command."""
+    check_pixel_options(args)
     results = run_table1(default_rig(), noise_px=args.noise, quantization_px=args.quantization)
     text = format_table1(results)
+    if args.noise or args.quantization != 0.05:
+        text += (f'\nDetections: Gaussian noise {args.noise} px, quantization '
+                 f'{args.quantization} px (the paper: none; default quantization 0.05 px).')
     print(text)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,7 @@ topics; a camera without one but with ``/<camera>/image_raw`` images gets
 the core :class:`~pseudo_stereo_ros.detection.BallDetector` run over its
 images first (one detector per camera, frames in bag order, as the detector
 node does live).  Either way the estimates come from
-:func:`~pseudo_stereo_ros.fusion.fuse`, the one offline code path, and go to
+:meth:`~pseudo_stereo_ros.fusion.Fuser.process`, the one offline code path, and go to
 ``--output`` (CSV) and/or ``--output-bag`` (``/ball/position``,
 PointStamped in ``--world-frame``, stamped with the shutter stamp).
 """
@@ -39,8 +39,8 @@ from ..bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_point_topic
 from ..csv_io import CsvError, read_observations, read_truth, write_estimates
 from ..detection import BallDetector
 from ..experiments import score
-from ..fusion import (DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, fuse,
-                      Fuser, METHODS, Observation)
+from ..fusion import (DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser,
+                      FuserConfigError, METHODS, Observation)
 
 NAME = 'track'
 HELP = ('run the fuser offline on observations (stamp_ns,camera,u,v CSV, or image points or '
@@ -186,8 +186,8 @@ def run(args) -> int:
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap')}
     try:
-        Fuser(cameras, **options)
-    except ValueError as err:
+        fuser = Fuser(cameras, **options)
+    except FuserConfigError as err:
         raise UsageError(str(err)) from err
     notes = []
     try:
@@ -207,10 +207,19 @@ def run(args) -> int:
                 truth_name = f'{args.bag} {GROUND_TRUTH_TOPIC}'
     except (CsvError, BagError) as err:
         raise UsageError(str(err)) from err
-    estimates, stats = fuse(cameras, observations, **options)
+    estimates = fuser.process(observations)
+    result = None
+    if truth is not None and (estimates or args.truth):
+        try:  # before writing anything: a failed run leaves no output
+            result = score(estimates, *truth)
+        except ValueError as err:
+            raise UsageError(f'truth {truth_name}: {err}') from err
     targets = []
     if args.output is not None:
-        write_estimates(args.output, estimates)
+        try:
+            write_estimates(args.output, estimates)
+        except CsvError as err:
+            raise UsageError(str(err)) from err
         targets.append(args.output)
     if args.output_bag is not None:
         try:
@@ -220,15 +229,12 @@ def run(args) -> int:
         targets.append(f'{args.output_bag} (/ball/position)')
     for note in notes:
         print(note, file=sys.stderr)
+    stats = fuser.stats
     dropped = ', '.join(f'{key} {stats[key]}' for key in DROP_REASONS if stats[key])
     print(f'{len(observations)} observations from {source} -> {len(estimates)} estimates '
           f'({args.method}) written to {" and ".join(targets)}'
           + (f'; no estimate: {dropped}' if dropped else ''), file=sys.stderr)
-    if truth is not None and (estimates or args.truth):
-        try:
-            result = score(estimates, *truth)
-        except ValueError as err:
-            raise UsageError(f'truth {truth_name}: {err}') from err
+    if result is not None:
         print(f'error against {truth_name}: per-coordinate MAE {result.mae_mm:.3f} mm, '
               f'mean 3D distance {result.distance_mm:.3f} mm over {result.count} estimates')
     return 0
