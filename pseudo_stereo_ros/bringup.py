@@ -117,7 +117,13 @@ def write_plot(monitor: MonitorNode, path: str) -> None:
         stamps = np.array(sorted(points), dtype=np.int64)
         return stamps, np.array([points[s] for s in stamps], dtype=float).reshape(-1, 3)
 
+    def broken(stamps, values):
+        """Insert NaN rows where a gap of over 0.1 s (a pause between flights) would be drawn."""
+        gaps = np.flatnonzero(np.diff(stamps) > 100_000_000) + 1
+        return np.insert(values.astype(float), gaps, np.nan, axis=0)
+
     truth_t, truth = series(monitor.truth)
+    truth = broken(truth_t, truth)
     t0 = truth_t[0] if len(truth_t) else 0
     fig = plt.figure(figsize=(12, 5))
     ax3d = fig.add_subplot(1, 2, 1, projection='3d')
@@ -130,7 +136,8 @@ def write_plot(monitor: MonitorNode, path: str) -> None:
             ax3d.plot(*xyz.T, '.', ms=2, color=colours[method], label=method)
         errors = monitor.errors(points)
         if len(errors):
-            errors_ax.plot((errors[:, 0] - t0) / 1e9, errors[:, 1] * 1e3, '.-', ms=2, lw=0.5,
+            line = broken(errors[:, 0].astype(np.int64), errors)
+            errors_ax.plot((line[:, 0] - t0) / 1e9, line[:, 1] * 1e3, '.-', ms=2, lw=0.5,
                            color=colours[method],
                            label=f'{method}: mean {errors[:, 1].mean() * 1e3:.2f} mm')
     ax3d.set_xlabel('x [m]')
@@ -154,6 +161,11 @@ def _print_summary(monitor: MonitorNode, seconds: float) -> None:
     print(f'bringup: ran {seconds:.1f} s')
     for key, value in summary['rates'].items():
         print(f'  rate {key:<24s} {value:7.2f} Hz')
+    points = sum(monitor.counts[f'{name}/ball/image_point'] for name in monitor.names)
+    positions = monitor.counts['ball/position']
+    print(f'  /ball/position messages per detected shutter event: {positions} / {points} '
+          '(60 Hz in flight; the first 3 events of a flight warm up, and between flights '
+          'the ball is out of view)')
     for method in ('paper', 'naive'):
         print(f'  mean 3D error {method:<6s} {summary["error_mm"][method]:9.3f} mm '
               f'({summary["matched"][method]} estimates with ground truth)')

@@ -70,6 +70,11 @@ class VirtualCameraNode(Node):
                            'wall-clock stamp of scenario time 0 [ns]; 0: 0.2 s after start',
                            min_value=0, read_only=True)
         self.loop = declare(self, 'loop', True, 'repeat the scenario')
+        # Between repetitions the ball is out of view, as between two real flights; without a
+        # pause the ball would jump from the end of the path to its start within one frame.
+        self.pause_s = declare(self, 'pause_s', 0.5,
+                               'time without a ball between repetitions of the scenario [s]',
+                               min_value=0.0, read_only=True)
         radius_m = declare(self, 'ball_radius_m', 0.02, 'ball radius [m]', min_value=0.001,
                            read_only=True)
         rgb = declare(self, 'ball_rgb', [255, 120, 0], 'ball colour (R, G, B) 0..255',
@@ -122,25 +127,27 @@ class VirtualCameraNode(Node):
 
     def _scenario_time(self, stamp_ns: int) -> float:
         seconds = (stamp_ns - self.epoch_ns) / 1e9
-        duration = self.scenario.duration_s
         if self.loop:
-            return seconds % duration
+            return seconds % (self.scenario.duration_s + self.pause_s)
         return seconds
 
     def _prepare(self, index: int) -> None:
         stamp = self.stamp_of(index)
         seconds = self._scenario_time(stamp)
         if seconds > self.scenario.duration_s:
-            self._prepared = (index, None, None, None)
-            return
-        position = self.scenario.position(np.array([seconds]))[0]
-        image = self.renderer.render(position)
-        truth = Estimate(stamp, self.camera.name, *map(float, position), 'truth')
+            if not self.loop:  # the scenario is over: no more frames
+                self._prepared = (index, None, None, None)
+                return
+            position = truth = None  # the pause between repetitions: frames without a ball
+        else:
+            position = self.scenario.position(np.array([seconds]))[0]
+            truth = estimate_to_point(
+                Estimate(stamp, self.camera.name, *map(float, position), 'truth'), 'world')
         self._prepared = (
             index,
-            array_to_image(image, 'bgr8', stamp, self.frame_id),
+            array_to_image(self.renderer.render(position), 'bgr8', stamp, self.frame_id),
             calibration_to_camera_info(self.calibration, stamp, self.frame_id),
-            estimate_to_point(truth, 'world'),
+            truth,
         )
 
     def _on_start(self) -> None:
@@ -161,7 +168,8 @@ class VirtualCameraNode(Node):
                 self._prepare(index)
             _, image, info, truth = self._prepared
             if image is not None:
-                self._truth_pub.publish(truth)
+                if truth is not None:
+                    self._truth_pub.publish(truth)
                 self._image_pub.publish(image)
                 self._info_pub.publish(info)
                 self.stats['frames'] += 1
