@@ -48,9 +48,13 @@ second the direct stereo point at the same stamp, which supersedes it
 
 Imperfect input: interpolation spans at most ``max_gap_ns``; data older than
 that is never used (a silent camera produces no estimates, and a camera or the
-whole rig coming back after a pause starts a fresh history); duplicate and
-out-of-order stamps and non-finite pixels are dropped and counted in
-:attr:`Fuser.stats`.  An estimate is never NaN or infinite.
+whole rig coming back after a pause starts a fresh history, as does a jump of
+the stamps back in time by more than ``max_gap_ns``, e.g. a replay looping);
+duplicate and out-of-order stamps of one camera and non-finite pixels are
+dropped and counted in :attr:`Fuser.stats`.  An observation that arrives
+after a later one of another camera (detectors of unequal latency) is not
+lost: the partner's frames on both sides of it give Steps I-III at its own
+time (kind ``'interpolated'``, counted as ``late``).  An estimate is never NaN or infinite.
 """
 
 from collections import Counter
@@ -89,7 +93,7 @@ DROP_REASONS = {
     'bad_stamp': 'the stamp is not an integer number of nanoseconds',
     'non_finite': 'u or v is NaN or infinite',
     'duplicate': 'same stamp as the previous observation of that camera',
-    'out_of_order': 'stamp older than an observation already processed',
+    'out_of_order': 'stamp older than the previous observation of that camera',
     'undistort_failed': 'the pixel could not be undistorted (far outside the lens model)',
     'no_partner': 'no other camera has an observation within max_gap',
     'warming_up': 'not enough recent history yet for the method',
@@ -121,8 +125,9 @@ class Estimate(NamedTuple):
 
     ``x, y, z`` are world coordinates [m], ``stamp_ns`` the shutter stamp of
     the event, ``camera`` the camera that fired, and ``kind`` one of
-    ``'pseudo'`` (paper method), ``'sync'`` (simultaneous pair) or
-    ``'naive'``.
+    ``'pseudo'`` (paper method), ``'sync'`` (simultaneous pair),
+    ``'interpolated'`` (an observation that arrived after a later one of the
+    partner: Steps I-III at its own time) or ``'naive'``.
     """
 
     stamp_ns: int
@@ -216,7 +221,8 @@ class Fuser:
                                                          for row in f)
         self._update = self._paper if method == 'paper' else self._naive
         self._newest = None
-        #: Counts: ``observations``, ``estimates``, ``resets`` and one key per drop reason.
+        #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
+        #: reason.
         self.stats = Counter()
 
     @property
@@ -253,21 +259,26 @@ class Fuser:
             stats['bad_stamp'] += 1
             return None
         frames = view.frames
+        newest = self._newest
+        if newest is not None and newest - stamp > self.max_gap_ns:
+            # Time jumped back by more than max_gap (a replay looping, a restarted clock): a new
+            # session, not a late observation.
+            self.reset()
+            stats['resets'] += 1
+            newest = None
         if frames and stamp <= frames[-1].stamp:
             stats['duplicate' if stamp == frames[-1].stamp else 'out_of_order'] += 1
             return None
-        newest = self._newest
-        if newest is not None:
-            if stamp < newest:
-                stats['out_of_order'] += 1
-                return None
-            if stamp - newest > self.max_gap_ns:
-                # A pause of the whole rig: the next flight starts from scratch.
-                self.reset()
-                stats['resets'] += 1
-            elif frames and stamp - frames[-1].stamp > self.max_gap_ns:
-                frames.clear()  # this camera was silent: its old frames say nothing now
-                stats['resets'] += 1
+        # Later than its own camera's last frame but earlier than another camera's newest: a
+        # detector slower than the other (or an executor taking callbacks out of order).
+        late = newest is not None and stamp < newest
+        if newest is not None and stamp - newest > self.max_gap_ns:
+            # A pause of the whole rig: the next flight starts from scratch.
+            self.reset()
+            stats['resets'] += 1
+        elif frames and stamp - frames[-1].stamp > self.max_gap_ns:
+            frames.clear()  # this camera was silent: its old frames say nothing now
+            stats['resets'] += 1
         x, y = view.camera.normalize_one(u, v)
         if not (math.isfinite(x) and math.isfinite(y)):
             stats['undistort_failed'] += 1
@@ -284,13 +295,23 @@ class Fuser:
         frames.append(frame)
         if len(frames) > _HISTORY:
             del frames[0]
-        self._newest = stamp
+        if not late:
+            self._newest = stamp
 
         partner = self._partner(view, stamp)
         if partner is None:
             stats['no_partner'] += 1
             return None
-        result = self._update(view, frame, partner)
+        result = None
+        if late and self.method == 'paper':
+            # The partner has frames on both sides of this one: Steps I-III at the event itself
+            # (what the method computes for its anchors) beat a prediction.
+            point = self._anchor(frame, view, partner)
+            if point is not None:
+                stats['late'] += 1
+                result = (point, 'interpolated')
+        if result is None:
+            result = self._update(view, frame, partner)
         if result is None:
             return None
         point, kind = result
