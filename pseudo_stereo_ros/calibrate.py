@@ -87,6 +87,23 @@ MAX_MEDIAN_RESIDUAL_PX = 10.0
 PRINCIPAL_POINT_MAX_OFFSET = 0.2
 #: A plane that is this flat is solved with OpenCV's planar PnP (IPPE).
 PLANAR_PNP_RATIO = 1e-6
+#: World points closer than this fraction of their extent, and pixels closer than
+#: ``DUPLICATE_PX``, are one point: a repeated row adds no constraint, it only hides how few
+#: points there are (3 points repeated 3 times look like 9 but leave the pose ambiguous).
+DUPLICATE_RATIO = 1e-9
+DUPLICATE_PX = 1e-6
+#: A second pose that reprojects the points within this RMS [px] (or within
+#: ``AMBIGUOUS_RATIO`` times the best RMS) fits them as well as measured pixels can tell:
+#: when it differs from the best pose by more than ``AMBIGUOUS_POSE_RATIO`` of the viewing
+#: distance (or ``AMBIGUOUS_ROTATION_DEG``), the pose is ambiguous and is refused.
+AMBIGUOUS_PX = 1.0
+AMBIGUOUS_RATIO = 2.0
+AMBIGUOUS_POSE_RATIO = 0.01
+AMBIGUOUS_ROTATION_DEG = 1.0
+#: A pose whose camera centre has a 1-sigma uncertainty above this fraction of the viewing
+#: distance for 1 px of pixel noise (from the Jacobian of the projection) is not determined
+#: by the points: refused.  A square of 4 points filling a third of the image gives 0.005.
+MAX_CENTRE_STD_RATIO = 0.1
 
 _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 _IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
@@ -189,13 +206,52 @@ def _spread(points: np.ndarray) -> np.ndarray:
     return np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
 
 
-def _check_correspondences(world, pixels, minimum: int) -> Tuple[np.ndarray, np.ndarray]:
+def _repeats(points: np.ndarray, tolerance: float) -> Tuple[int, dict]:
+    """Return the number of distinct points and, per first occurrence, the indices repeating it."""
+    keys = np.round(points / tolerance) + 0.0  # + 0.0 turns -0.0 into 0.0
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    owner = first[np.asarray(inverse).ravel()]
+    groups = {}
+    for index in np.flatnonzero(owner != np.arange(len(points))):
+        groups.setdefault(int(owner[index]), []).append(int(index))
+    return len(first), groups
+
+
+def _describe_repeats(groups: dict, lines: Optional[Sequence[int]]) -> str:
+    """Return e.g. ``lines 3, 4 repeat line 2; line 6 repeats line 5``."""
+    word = 'line' if lines is not None else 'point'
+    label = (lambda i: str(int(lines[i]))) if lines is not None else str
+    parts = [f'{word}{"s" if len(repeats) > 1 else ""} {", ".join(label(i) for i in repeats)} '
+             f'repeat{"" if len(repeats) > 1 else "s"} {word} {label(first)}'
+             for first, repeats in sorted(groups.items())]
+    if len(parts) > 5:
+        parts = parts[:5] + [f'and {len(parts) - 5} more']
+    return '; '.join(parts)
+
+
+def _check_correspondences(world, pixels, minimum: int,
+                           lines: Optional[Sequence[int]] = None
+                           ) -> Tuple[np.ndarray, np.ndarray]:
     world = _as_points(world, 3, 'world points')
     pixels = _as_points(pixels, 2, 'pixels')
     if len(world) != len(pixels):
         raise CalibrationFitError(f'{len(world)} world points but {len(pixels)} pixels')
+    if lines is not None and len(lines) != len(world):
+        raise CalibrationFitError(f'{len(lines)} line numbers for {len(world)} points')
     if len(world) < minimum:
         raise CalibrationFitError(f'too few points: {len(world)}, need at least {minimum}')
+    extent = float(np.max(np.ptp(world, axis=0)))
+    distinct, groups = _repeats(world, max(DUPLICATE_RATIO * extent, 1e-300))
+    if groups:
+        raise CalibrationFitError(
+            f'repeated world points: {distinct} distinct of {len(world)} '
+            f'({_describe_repeats(groups, lines)}); a repeat adds no constraint, remove it'
+            + (f' (need at least {minimum} distinct points)' if distinct < minimum else ''))
+    distinct, groups = _repeats(pixels, DUPLICATE_PX)
+    if distinct < minimum:
+        raise CalibrationFitError(
+            f'too few distinct pixels: {distinct} of {len(pixels)} '
+            f'({_describe_repeats(groups, lines)} at the same pixel), need at least {minimum}')
     spread = _spread(world)
     if not spread[0] > 0 or spread[1] < COLLINEAR_RATIO * spread[0]:
         raise CalibrationFitError('the world points are collinear (or coincide): a line does '
@@ -504,20 +560,70 @@ def _pnp_candidates(world: np.ndarray, ideal: np.ndarray, camera_matrix: np.ndar
     return candidates
 
 
+def _flipped_start(world: np.ndarray, rotation: np.ndarray,
+                   translation: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Return a pose start on the other side of the points' best-fit plane, looking at them.
+
+    For (nearly) flat or distant point sets the camera mirrored in that plane sees almost the
+    same image (the Necker flip): refining from here finds that second minimum if it exists.
+    """
+    centroid = world.mean(axis=0)
+    normal = np.linalg.svd(world - centroid)[2][-1]
+    center = -rotation.T @ translation
+    flipped = center - 2.0 * ((center - centroid) @ normal) * normal
+    axis_z = centroid - flipped
+    axis_z /= np.linalg.norm(axis_z)
+    axis_x = rotation[0] - (rotation[0] @ axis_z) * axis_z
+    if np.linalg.norm(axis_x) < 1e-9:
+        axis_x = rotation[1] - (rotation[1] @ axis_z) * axis_z
+    axis_x /= np.linalg.norm(axis_x)
+    flipped_rotation = np.vstack((axis_x, np.cross(axis_z, axis_x), axis_z))
+    return cv2.Rodrigues(flipped_rotation)[0], -flipped_rotation @ flipped
+
+
+def _pose_center_std(world: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
+                     camera_matrix: np.ndarray) -> float:
+    """Return the 1-sigma uncertainty [m] of the camera centre (worst axis) at 1 px noise."""
+    jacobian = cv2.projectPoints(world, rvec, tvec, camera_matrix, None)[1][:, :6]
+    try:
+        covariance = np.linalg.inv(jacobian.T @ jacobian)
+    except np.linalg.LinAlgError:
+        return math.inf
+    params = np.concatenate((rvec.ravel(), tvec.ravel()))
+
+    def center(x):
+        return -cv2.Rodrigues(x[:3])[0].T @ x[3:]
+
+    step = 1e-7
+    derivative = np.column_stack([(center(params + step * e) - center(params - step * e))
+                                  / (2.0 * step) for e in np.eye(6)])
+    eigen = np.linalg.eigvalsh(derivative @ covariance @ derivative.T)
+    return float(math.sqrt(max(eigen[-1], 0.0))) if np.all(np.isfinite(eigen)) else math.inf
+
+
 def calibrate_extrinsics(intrinsics: CameraCalibration, world, pixels, *,
-                         camera_name: Optional[str] = None) -> CalibrationResult:
+                         camera_name: Optional[str] = None,
+                         lines: Optional[Sequence[int]] = None) -> CalibrationResult:
     """
     Fit a camera's pose from world <-> raw-pixel correspondences and its known intrinsics.
 
+    Every solver's poses and a start mirrored in the points' plane are refined; the pose is
+    refused when a second, clearly different pose reprojects the points about as well
+    (:data:`AMBIGUOUS_PX`) or when the points do not pin the camera centre down
+    (:data:`MAX_CENTRE_STD_RATIO`).
+
     :param intrinsics: the camera's intrinsics and distortion (its pose is ignored)
-    :param world: (N, 3) world points [m], N >= 4, not collinear (a plane is fine)
+    :param world: (N, 3) world points [m], N >= 4 distinct, not collinear (a plane is fine)
     :param pixels: (N, 2) raw pixels of the points in this camera
     :param camera_name: ``camera_name`` of the result (default: the intrinsics' name)
+    :param lines: (N,) CSV line of each point, used in messages (default: the point index)
     :return: the result, with the intrinsics unchanged and the fitted pose
-    :raises CalibrationFitError: too few, collinear or non-finite points, pixels outside the
-        image, no pose with every point in front of the camera
+    :raises CalibrationFitError: too few distinct, repeated, collinear or non-finite points,
+        pixels outside the image, no pose with every point in front of the camera, an
+        ambiguous or undetermined pose
     """
-    world, pixels = _check_correspondences(world, pixels, 4)
+    world, pixels = _check_correspondences(world, pixels, 4, lines)
     image_size = (intrinsics.image_width, intrinsics.image_height)
     _check_inside(pixels, image_size)
     camera = Camera(replace(intrinsics, rotation=np.eye(3), translation=np.zeros(3)))
@@ -528,29 +634,64 @@ def calibrate_extrinsics(intrinsics: CameraCalibration, world, pixels, *,
     spread = _spread(world)
     planar = spread[2] < PLANAR_PNP_RATIO * spread[0]
     candidates = _pnp_candidates(world, ideal, k, planar)
-    best = None
-    for rvec, tvec in candidates:
+    fits = []
+
+    def refine(rvec, tvec):
         rvec, tvec = np.asarray(rvec, float).reshape(3, 1), np.asarray(tvec, float).reshape(3, 1)
         if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
-            continue
+            return
         rvec, tvec = cv2.solvePnPRefineLM(world, ideal, k, None, rvec, tvec, _LM_CRITERIA)
         rotation = cv2.Rodrigues(rvec)[0]
-        in_front = np.all(world @ rotation[2] + tvec[2, 0] > 0)
+        in_front = bool(np.all(world @ rotation[2] + tvec[2, 0] > 0))
         projected = cv2.projectPoints(world, rvec, tvec, k, None)[0].reshape(-1, 2)
-        error = float(np.sum((projected - ideal) ** 2))
-        key = (not in_front, error)
-        if best is None or key < best[0]:
-            best = (key, rotation, tvec.ravel())
-    if best is None:
+        rms = float(np.sqrt(np.mean(np.sum((projected - ideal) ** 2, axis=1))))
+        if math.isfinite(rms):
+            fits.append(((not in_front, rms), rotation, tvec.ravel(), rvec))
+
+    for rvec, tvec in candidates:
+        refine(rvec, tvec)
+    if not fits:
         raise CalibrationFitError('no pose fits the points (OpenCV solvePnP failed)')
-    _, rotation, translation = best
+    for _, rotation, translation, _ in list(fits):
+        refine(*_flipped_start(world, rotation, translation))
+    fits.sort(key=lambda fit: fit[0])
+    (_, best_rms), rotation, translation, rvec = fits[0]
     _check_front(world, rotation, translation)
+    center = -rotation.T @ translation
+    distance = float(np.linalg.norm(world.mean(axis=0) - center))
+    for (behind, rms), other_rotation, other_translation, _ in fits[1:]:
+        if behind or rms > max(AMBIGUOUS_PX, AMBIGUOUS_RATIO * best_rms):
+            continue
+        other_center = -other_rotation.T @ other_translation
+        shift = float(np.linalg.norm(other_center - center))
+        turn = _rotation_angle_deg(rotation, other_rotation)
+        if shift > AMBIGUOUS_POSE_RATIO * distance or turn > AMBIGUOUS_ROTATION_DEG:
+            raise CalibrationFitError(
+                f'ambiguous pose: two camera poses fit the {len(world)} points (RMS '
+                f'{best_rms:.3f} and {rms:.3f} px) with centres '
+                + ', '.join(f'{x:.3f}' for x in center) + ' and '
+                + ', '.join(f'{x:.3f}' for x in other_center)
+                + f' m ({shift:.2f} m, {turn:.1f} deg apart); add points spread wider across '
+                'the image and in depth')
+    center_std = _pose_center_std(world, rvec, translation.reshape(3, 1), k)
+    if not center_std <= MAX_CENTRE_STD_RATIO * distance:
+        raise CalibrationFitError(
+            f'the points do not fix the pose: 1 px of pixel noise moves the camera centre by '
+            f'{center_std:.3g} m (1 sigma) at a distance of {distance:.2f} m (> '
+            f'{MAX_CENTRE_STD_RATIO:.0%}); spread the points wider across the image and avoid '
+            'near-collinear points')
     calibration = replace(intrinsics, camera_name=str(camera_name or intrinsics.camera_name),
                           rotation=rotation, translation=translation)
     reprojected = Camera(calibration).project(world)
-    notes = ('planar points: IPPE',) if planar else ()
+    notes = (('planar points: IPPE',) if planar else ()) + (
+        f'camera centre 1-sigma {1000 * center_std:.1f} mm per px of pixel noise',)
     return _make_result('extrinsics', calibration, pixels, reprojected, world=world,
                         dist_terms=0, notes=notes)
+
+
+def _rotation_angle_deg(r_a: np.ndarray, r_b: np.ndarray) -> float:
+    cosine = (np.trace(r_a @ r_b.T) - 1.0) / 2.0
+    return math.degrees(math.acos(float(np.clip(cosine, -1.0, 1.0))))
 
 
 # -- full calibration ---------------------------------------------------------------------------
@@ -702,7 +843,8 @@ def _refine_full(world: np.ndarray, pixels: np.ndarray, image_size: Tuple[int, i
 
 
 def calibrate_full(world, pixels, image_size: Tuple[int, int], *, camera_name: str = 'camera',
-                   dist_terms: Optional[int] = None) -> CalibrationResult:
+                   dist_terms: Optional[int] = None,
+                   lines: Optional[Sequence[int]] = None) -> CalibrationResult:
     """
     Calibrate intrinsics, distortion and pose from non-coplanar correspondences (the paper's way).
 
@@ -715,12 +857,14 @@ def calibrate_full(world, pixels, image_size: Tuple[int, int], *, camera_name: s
     :param camera_name: ``camera_name`` of the result
     :param dist_terms: distortion terms to estimate (:data:`DISTORTION_TERMS`); default
         :func:`auto_dist_terms` of N
+    :param lines: (N,) CSV line of each point, used in messages (default: the point index)
     :return: the result
-    :raises CalibrationFitError: too few, collinear, coplanar or non-finite points, pixels
-        outside the image, a principal point outside the image, points behind the camera
+    :raises CalibrationFitError: too few distinct, repeated, collinear, coplanar or non-finite
+        points, pixels outside the image, a principal point outside the image, points behind
+        the camera
     """
     width, height = _check_image_size(image_size)
-    world, pixels = _check_correspondences(world, pixels, 6)
+    world, pixels = _check_correspondences(world, pixels, 6, lines)
     spread = _spread(world)
     if spread[2] < COPLANAR_RATIO * spread[0]:
         raise CalibrationFitError(

@@ -29,7 +29,8 @@ import cv2
 import numpy as np
 from pseudo_stereo_ros.calibrate import (calibrate_extrinsics, calibrate_full,
                                          calibrate_intrinsics, CalibrationFitError)
-from pseudo_stereo_ros.calibration import CalibrationError, load_calibration
+from pseudo_stereo_ros.calibration import (CalibrationError, load_calibration,
+                                           save_calibration)
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli import main
 from pseudo_stereo_ros.simulation import look_at_calibration
@@ -342,6 +343,53 @@ def test_degenerate_extrinsics_input_is_refused(correspondences):
         calibrate_extrinsics(intrinsics, world * (1, -1, 1), pixels)
 
 
+def test_repeated_points_are_counted_once(correspondences):
+    truth, world, pixels = correspondences
+    intrinsics = replace(truth, rotation=np.eye(3), translation=np.zeros(3))
+    # 3 distinct points repeated 3 times: 9 rows pass a row count, but the pose is ambiguous.
+    triple_world, triple_pixels = np.repeat(world[:3], 3, axis=0), np.repeat(pixels[:3], 3, 0)
+    lines = np.arange(2, 11)
+    with pytest.raises(CalibrationFitError,
+                       match=r'3 distinct of 9 \(lines 3, 4 repeat line 2; lines 6, 7 repeat '
+                             r'line 5; lines 9, 10 repeat line 8\).*at least 4 distinct'):
+        calibrate_extrinsics(intrinsics, triple_world, triple_pixels, lines=lines)
+    with pytest.raises(CalibrationFitError, match='5 distinct of 10 .*at least 6 distinct'):
+        calibrate_full(np.repeat(world[:5], 2, axis=0), np.repeat(pixels[:5], 2, axis=0),
+                       (640, 480))
+    # One repeated row among many still weighs that point twice: refused, naming the point.
+    repeated = np.vstack((world, world[7:8])), np.vstack((pixels, pixels[7:8] + 0.2))
+    with pytest.raises(CalibrationFitError, match=r'40 distinct of 41 \(point 40 repeats point 7'):
+        calibrate_extrinsics(intrinsics, *repeated)
+    with pytest.raises(CalibrationFitError, match='40 distinct of 41'):
+        calibrate_full(*repeated, (640, 480))
+    # Distinct world points but only 3 distinct pixels.
+    with pytest.raises(CalibrationFitError, match='too few distinct pixels: 3 of 4'):
+        calibrate_extrinsics(intrinsics, world[:4], pixels[[0, 1, 2, 2]])
+
+
+def test_ambiguous_or_undetermined_pose_is_refused():
+    truth = _synthetic_calibration()
+    camera = Camera(truth)
+    intrinsics = replace(truth, rotation=np.eye(3), translation=np.zeros(3))
+    distance = np.linalg.norm(truth.center - (0.5, 0.5, 0.5))
+    corners = np.array(((-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)), float)
+    # A 20 cm square 4 m away spans ~25 px: the camera mirrored in its plane (the Necker flip)
+    # sees the same image to within 0.3 px noise, so either pose is a guess.
+    small = (0.5, 0.5, 0.5) + 0.1 * corners
+    noisy = camera.project(small) + np.random.default_rng(41).normal(0.0, NOISE_PX, (4, 2))
+    with pytest.raises(CalibrationFitError, match='ambiguous pose: two camera poses fit'):
+        calibrate_extrinsics(intrinsics, small, noisy)
+    # 4 points, one 2 cm off the line of the other three: the centre is not pinned down.
+    near_line = np.array(((0, 0, 0.5), (0.6, 0.6, 0.5), (1.2, 1.2, 0.5), (0.6, 0.62, 0.5)))
+    with pytest.raises(CalibrationFitError, match='ambiguous pose|do not fix the pose'):
+        calibrate_extrinsics(intrinsics, near_line, camera.project(near_line))
+    # The same square at 1 m size is fine and reports its uncertainty.
+    large = (0.5, 0.5, 0.5) + 0.5 * corners
+    result = calibrate_extrinsics(intrinsics, large, camera.project(large))
+    assert np.linalg.norm(result.calibration.center - truth.center) < 1e-6 * distance
+    assert any('per px of pixel noise' in note for note in result.notes)
+
+
 # -- the real rig -------------------------------------------------------------------------------
 
 
@@ -443,6 +491,21 @@ def test_cli_errors_exit_2_with_one_line(tmp_path, capsys, text, extra, message)
     error = capsys.readouterr().err
     assert status == 2
     assert message in error and error.count('\n') == 1
+    assert not out.exists()
+
+
+def test_cli_extrinsics_refuses_repeated_rows(tmp_path, capsys, correspondences):
+    truth, world, pixels = correspondences
+    csv_path = tmp_path / 'dup.csv'
+    _write_csv(csv_path, np.repeat(world[:3], 3, axis=0), np.repeat(pixels[:3], 3, axis=0))
+    intrinsics = tmp_path / 'intrinsics.yaml'
+    save_calibration(replace(truth, rotation=np.eye(3), translation=np.zeros(3)), intrinsics)
+    out = tmp_path / 'posed.yaml'
+    status = main(['calibrate', 'extrinsics', '--intrinsics', str(intrinsics), '--points',
+                   str(csv_path), '--out', str(out)])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1
+    assert '3 distinct of 9 (lines 3, 4 repeat line 2;' in error
     assert not out.exists()
 
 

@@ -191,14 +191,15 @@ def run(args) -> int:
         elif args.mode == 'extrinsics':
             intrinsics = load_calibration(args.intrinsics)
             world, pixels, lines = read_correspondences(args.points)
-            result = calibrate_extrinsics(intrinsics, world, pixels, camera_name=args.name)
+            result = calibrate_extrinsics(intrinsics, world, pixels, camera_name=args.name,
+                                          lines=lines)
         else:
             size = parse_size(args.image_size, '--image-size')
             world, pixels, lines = read_correspondences(args.points)
             terms = args.dist_terms if args.dist_terms is not None else auto_dist_terms(
                 len(world))
             result = calibrate_full(world, pixels, size, camera_name=args.name or out.stem,
-                                    dist_terms=terms)
+                                    dist_terms=terms, lines=lines)
     except CsvError as err:
         raise UsageError(str(err)) from err
     # Write before the long residual table, so a closed pipe (`| head`) cannot lose the file.
