@@ -48,6 +48,7 @@ try:
 except ImportError:  # rosbags < 0.11 nests them in Writer
     CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
 from .fusion import Estimate, Observation
+from .stamps import stamp_fields, stamp_ns as stamp_to_ns
 
 __all__ = [
     'BagError',
@@ -56,6 +57,7 @@ __all__ = [
     'IMAGE_TYPE',
     'POSITION_TOPIC',
     'bag_cameras',
+    'bag_message_counts',
     'bag_topics',
     'image_message',
     'image_point_topic',
@@ -165,6 +167,41 @@ def bag_cameras(path: PathLike) -> List[str]:
     return sorted(m.group(1) for m in map(_IMAGE_POINT_RE.match, topics) if m)
 
 
+def _connections(reader: Reader, path: PathLike, topics: Optional[Sequence[str]]) -> list:
+    """Return the reader's connections of the topics (all when None); each must exist."""
+    if topics is None:
+        return list(reader.connections)
+    available = _topics(reader)
+    missing = [topic for topic in topics if topic not in available]
+    if missing:
+        raise BagError(f'{path}: no topic {", ".join(missing)} (the bag has: '
+                       f'{", ".join(sorted(available)) or "no topics"})')
+    return [c for c in reader.connections if c.topic in set(topics)]
+
+
+def bag_message_counts(path: PathLike, topics: Optional[Sequence[str]] = None
+                       ) -> Dict[str, Tuple[str, int]]:
+    """
+    Return the topics of a bag with their type and message count, from the bag's index.
+
+    No message is read, so this takes the same time for any bag size; damage inside the
+    message data shows only when the messages are read (:func:`iter_raw` raises then).
+
+    :param path: the bag (directory, ``.mcap`` or ``.db3``)
+    :param topics: the topics (all when None); each must exist
+    :return: topic -> ``(msgtype, message_count)``
+    """
+    reader = _open(path)
+    try:
+        counts: Dict[str, Tuple[str, int]] = {}
+        for connection in _connections(reader, path, topics):
+            _, count = counts.get(connection.topic, (connection.msgtype, 0))
+            counts[connection.topic] = (connection.msgtype, count + int(connection.msgcount))
+        return counts
+    finally:
+        reader.close()
+
+
 def iter_raw(path: PathLike, topics: Optional[Sequence[str]] = None
              ) -> Iterator[Tuple[str, str, int, bytes]]:
     """
@@ -176,15 +213,7 @@ def iter_raw(path: PathLike, topics: Optional[Sequence[str]] = None
     """
     reader = _open(path)
     try:
-        available = _topics(reader)
-        if topics is None:
-            connections = reader.connections
-        else:
-            missing = [topic for topic in topics if topic not in available]
-            if missing:
-                raise BagError(f'{path}: no topic {", ".join(missing)} (the bag has: '
-                               f'{", ".join(sorted(available)) or "no topics"})')
-            connections = [c for c in reader.connections if c.topic in set(topics)]
+        connections = _connections(reader, path, topics)
         try:
             for connection, stamp, data in reader.messages(connections=connections):
                 yield connection.topic, connection.msgtype, int(stamp), bytes(data)
@@ -235,7 +264,7 @@ def _check_types(path: PathLike, topics: Sequence[str], expected: str = IMAGE_PO
 
 
 def _stamp_ns(msg) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+    return stamp_to_ns(msg.header.stamp)
 
 
 def read_observations(path: PathLike, cameras: Optional[Sequence[str]] = None
@@ -303,8 +332,7 @@ def read_images(path: PathLike, topic: str
 
 def _header(stamp_ns: int, frame_id: str):
     types = typestore().types
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    stamp = types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec)
+    stamp = types['builtin_interfaces/msg/Time'](**stamp_fields(stamp_ns))
     return types['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id)
 
 

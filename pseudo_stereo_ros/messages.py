@@ -38,6 +38,8 @@ from visualization_msgs.msg import Marker
 from .calibration import CameraCalibration
 from .detection import ENCODING_CHANNELS, EncodingError, image_array
 from .fusion import Estimate, Observation
+# The ns <-> (sec, nanosec) arithmetic, shared with bagio.
+from .stamps import stamp_fields, stamp_ns
 
 __all__ = [
     'ENCODING_CHANNELS',
@@ -73,7 +75,7 @@ _LEVELS = {
 
 def stamp_to_ns(stamp: Time) -> int:
     """Return a ``builtin_interfaces/Time`` as integer nanoseconds."""
-    return int(stamp.sec) * _NS_PER_S + int(stamp.nanosec)
+    return stamp_ns(stamp)
 
 
 def ns_to_stamp(stamp_ns: int) -> Time:
@@ -83,8 +85,7 @@ def ns_to_stamp(stamp_ns: int) -> Time:
     :param stamp_ns: a non-negative stamp [ns]
     :return: the message (``sec``, ``nanosec`` with ``0 <= nanosec < 1e9``)
     """
-    sec, nanosec = divmod(int(stamp_ns), _NS_PER_S)
-    return Time(sec=sec, nanosec=nanosec)
+    return Time(**stamp_fields(stamp_ns))
 
 
 def header(stamp_ns: int, frame_id: str = '') -> Header:

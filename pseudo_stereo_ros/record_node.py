@@ -18,13 +18,27 @@
 Messages are taken serialized (``raw=True``) and written as they arrive with
 rosbags' Writer, log time = receive time on the node's clock.  Types come
 from the ``types`` parameter (same order as ``topics``) or, when it is
-empty, from the ROS graph: a topic is subscribed as soon as a publisher
-shows it.  rclpy turns SIGINT and SIGTERM into a shutdown; the node then
-closes the bag, so every message received is in it.
+empty, from the ROS graph.
+
+A topic is subscribed when its first publisher shows in the graph (checked
+every 0.1 s), with the QoS reliability its publishers offer: reliable when
+every publisher is reliable, else best effort (a best-effort subscription
+matches both kinds; a reliable one never receives from a best-effort
+publisher such as a camera with sensor-data QoS, and a best-effort one
+would lose a reliable publisher's retransmissions).  When a best-effort
+publisher appears on a topic already subscribed reliably, the topic is
+subscribed again best effort; messages sent during the switch can be
+missing and a warning says so.
+
+rclpy turns SIGINT and SIGTERM into a shutdown; the node then closes the
+bag, so every message taken from a subscription is in it, and logs how many
+that was per topic.  (Messages DDS had delivered but the node had not taken
+yet are not.)
 """
 
 from pathlib import Path
 
+import rclpy.logging
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
@@ -68,61 +82,86 @@ class RecordNode(Node):
             self._writer.open()
         except (WriterError, OSError) as err:
             raise StartupError(f'parameter bag: cannot create {self.bag} ({err})') from err
+        self._types = dict(zip(self.topics, types))
+        self._summary = None
         self._connections = {}
         self._inputs = {}
+        #: The reliability each topic is subscribed with (topics not subscribed yet: absent).
+        self.reliability = {}
         #: Messages written per topic.
         self.counts = dict.fromkeys(self.topics, 0)
-        for topic, msgtype in zip(self.topics, types):
-            self._subscribe(topic, msgtype)
-        self._discovery = None
-        if len(self._inputs) < len(self.topics):
-            self._discovery = self.create_timer(0.1, self._discover)
+        self._watch = self.create_timer(0.1, self._watch_graph)
+        self._watch_graph()
 
-    def _discover(self):
-        found = dict(self.get_topic_names_and_types())
+    def _watch_graph(self):
+        """Subscribe topics whose publishers appeared; follow their reliability."""
         for topic in self.topics:
-            if topic in self._inputs or topic not in found:
+            offered = self.get_publishers_info_by_topic(topic)
+            if not offered:
                 continue
-            msgtype = found[topic][0]
-            if msgtype not in typestore().types:
-                self.get_logger().error(f'{topic}: type {msgtype} is unknown to rosbags; '
-                                        f'not recorded', once=True)
-                continue
-            self._subscribe(topic, msgtype)
-        if len(self._inputs) == len(self.topics):
-            self._discovery.cancel()
+            reliable = all(info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+                           for info in offered)
+            wanted = ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT
+            current = self.reliability.get(topic)
+            if current is None:
+                msgtype = self._types.get(topic) or offered[0].topic_type
+                if msgtype not in typestore().types:
+                    self.get_logger().error(f'{topic}: type {msgtype} is unknown to rosbags; '
+                                            f'not recorded', once=True)
+                    continue
+                self._connections[topic] = self._writer.add_connection(
+                    topic, msgtype, typestore=typestore())
+                self._subscribe(topic, msgtype, wanted)
+                self.get_logger().info(f'recording {topic} ({msgtype}, '
+                                       f'{wanted.name.lower().replace("_", " ")})')
+            elif current == ReliabilityPolicy.RELIABLE and not reliable:
+                # A reliable subscription never matches a best-effort publisher (sensor data).
+                self.destroy_subscription(self._inputs.pop(topic))
+                self._subscribe(topic, self._connections[topic].msgtype, wanted)
+                self.get_logger().warning(f'{topic}: a best-effort publisher appeared; '
+                                          f'subscribed again best effort (messages sent '
+                                          f'during the switch may be missing)')
+        if all(self.reliability.get(topic) == ReliabilityPolicy.BEST_EFFORT
+               for topic in self.topics):
+            self._watch.cancel()  # best effort matches every publisher: nothing left to follow
 
-    def _subscribe(self, topic: str, msgtype: str):
-        qos = QoSProfile(depth=self.depth)
-        offered = self.get_publishers_info_by_topic(topic)
-        if offered and any(info.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-                           for info in offered):
-            # A reliable subscription would not match a best-effort publisher (sensor data).
-            qos.reliability = ReliabilityPolicy.BEST_EFFORT
-        self._connections[topic] = self._writer.add_connection(topic, msgtype,
-                                                               typestore=typestore())
+    def _subscribe(self, topic: str, msgtype: str, reliability: ReliabilityPolicy):
+        qos = QoSProfile(depth=self.depth, reliability=reliability)
         self._inputs[topic] = self.create_subscription(
             message_class(msgtype), topic, lambda data, t=topic: self._write(t, data), qos,
             raw=True)
-        self.get_logger().info(f'recording {topic} ({msgtype})')
+        self.reliability[topic] = reliability
 
     def _write(self, topic: str, data: bytes):
         if self._writer is None:
             return
         self._writer.write(self._connections[topic], self.get_clock().now().nanoseconds, data)
         self.counts[topic] += 1
+        if self.counts[topic] == 1:
+            self.get_logger().info(f'{topic}: first message')
 
     def close(self):
         """Close the bag (idempotent): everything received so far is in it."""
         if self._writer is not None:
             writer, self._writer = self._writer, None
-            # No logging here: after SIGINT the context (and /rosout) is already shut down.
             writer.close()
+            self._summary = (f'closed {self.bag}: recorded {sum(self.counts.values())} '
+                             f'messages (' + ', '.join(f'{topic}: {count}' for topic, count
+                                                       in self.counts.items()) + ')')
+            if self.context.ok():
+                self.get_logger().info(self._summary)
+                self._summary = None
 
     def destroy_node(self):
         """Close the bag, then destroy the node."""
         self.close()
-        return super().destroy_node()
+        name = self.get_logger().name
+        result = super().destroy_node()
+        if self._summary:
+            # After SIGINT the context, and /rosout, are shut down: log once the node is gone.
+            rclpy.logging.get_logger(name).info(self._summary)
+            self._summary = None
+        return result
 
 
 def main(args=None) -> int:

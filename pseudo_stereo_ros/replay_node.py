@@ -27,7 +27,12 @@ fast), ``start_offset_s`` (skip the bag's first seconds), ``topics`` (topics
 to play; empty = all), ``remap`` (``from:=to`` entries), ``loop``,
 ``publish_clock``, ``qos_depth`` and ``wait_for_subscribers_s`` (wait up to
 this long for each topic to have a subscriber before the first message).
-When the bag ends (without ``loop``) the executable exits with status 0.
+The topics and their types come from the bag's index (no message is read
+at start-up, so a long bag starts as fast as a short one).  When the bag
+ends (without ``loop``), or on Ctrl-C / SIGTERM, the executable exits with
+status 0; it exits 1 when it cannot start (bad parameter or parameter file,
+no such bag, not a bag, no messages) or when the bag turns out to be
+damaged during playback.
 """
 
 import importlib
@@ -38,11 +43,13 @@ from typing import List, Optional
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from .bagio import BagError, iter_raw
+from .bagio import bag_message_counts, BagError, iter_raw
+from .messages import ns_to_stamp
 from .node_tools import declare, STARTUP_ERRORS, StartupError
 
 __all__ = ['ReplayNode', 'main', 'message_class']
@@ -108,13 +115,13 @@ class ReplayNode(Node):
         self.topics = [topic for topic in topics if topic] or None
         self.remap = _parse_remap([entry for entry in remap if entry])
 
-        # Read the index and types now: a bad bag or topic stops the node at start-up.
-        types = {}
-        for topic, msgtype, _, _ in iter_raw(self.bag, self.topics):
-            types.setdefault(topic, msgtype)
-        if not types:
+        # The index only: a missing bag or topic, or an empty bag, stops the node at start-up;
+        # damage inside the message data shows during playback (self.error, exit status 1).
+        counts = bag_message_counts(self.bag, self.topics)
+        self._count = sum(count for _, count in counts.values())
+        if not self._count:
             raise BagError(f'{self.bag}: no messages to play')
-        self._classes = {topic: message_class(msgtype) for topic, msgtype in types.items()}
+        self._classes = {topic: message_class(msgtype) for topic, (msgtype, _) in counts.items()}
         qos = QoSProfile(depth=depth)
         self._outputs = {topic: self.create_publisher(cls, self.remap.get(topic, topic), qos)
                          for topic, cls in self._classes.items()}
@@ -126,6 +133,8 @@ class ReplayNode(Node):
         #: Messages published, and messages that did not decode (skipped).
         self.published = 0
         self.dropped = 0
+        #: Why playback stopped before the end of the bag (a damaged bag), or None.
+        self.error: Optional[str] = None
         self.finished = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._play, name='replay', daemon=True)
@@ -144,26 +153,42 @@ class ReplayNode(Node):
         while (time.monotonic() < deadline and not self._stop.is_set()
                and any(p.get_subscription_count() == 0 for p in self._outputs.values())):
             self._stop.wait(0.02)
+        self.get_logger().info(f'playing {self.bag}: {self._count} messages on '
+                               f'{len(self._outputs)} topics at rate {self.rate:g}')
         try:
-            while not self._stop.is_set():
+            while not self._stop.is_set() and self.context.ok():
                 self._play_once()
                 if not self.loop:
                     break
         except BagError as err:
+            self.error = str(err)
             self.get_logger().error(f'playback stopped: {err}')
+        except _rclpy.RCLError:
+            # Ctrl-C / SIGTERM shut the context down between the check and the publish.
+            pass
         finally:
-            # Reliable subscribers get the tail of the bag before the executable exits.
-            for publisher in self._outputs.values():
-                publisher.wait_for_all_acked(Duration(seconds=1.0))
-            self.get_logger().info(f'played {self.published} messages ({self.dropped} skipped)')
+            # Reliable subscribers get the tail of the bag before the executable exits (not
+            # after a shutdown: the publishers are gone with the context then).
+            try:
+                for publisher in self._outputs.values():
+                    if not self.context.ok():
+                        break
+                    publisher.wait_for_all_acked(Duration(seconds=1.0))
+            except _rclpy.RCLError:
+                pass
+            # No summary here: a signal can shut /rosout down at any moment; main() logs it.
             self.finished.set()
+
+    def summary(self) -> str:
+        """Return the one-line playback summary: messages published and skipped."""
+        return f'played {self.published} messages ({self.dropped} skipped)'
 
     def _play_once(self):
         start_bag: Optional[int] = None
         start_wall = None
         offset_ns = int(round(self.start_offset_s * 1e9))
         for topic, _, log_time, data in iter_raw(self.bag, self.topics):
-            if self._stop.is_set():
+            if self._stop.is_set() or not self.context.ok():
                 return
             if start_bag is None:
                 start_bag = log_time + offset_ns
@@ -173,7 +198,7 @@ class ReplayNode(Node):
                 start_wall = time.monotonic()
             due = start_wall + (log_time - start_bag) / 1e9 / self.rate
             delay = due - time.monotonic()
-            if delay > 0 and self._stop.wait(delay):
+            if (delay > 0 and self._stop.wait(delay)) or not self.context.ok():
                 return
             try:
                 message = deserialize_message(data, self._classes[topic])
@@ -183,22 +208,26 @@ class ReplayNode(Node):
                                           throttle_duration_sec=5.0)
                 continue
             if self._clock_publisher is not None:
-                clock = self._clock_class()
-                clock.clock.sec, clock.clock.nanosec = divmod(log_time, 1_000_000_000)
-                self._clock_publisher.publish(clock)
+                self._clock_publisher.publish(self._clock_class(clock=ns_to_stamp(log_time)))
             self._outputs[topic].publish(message)
             self.published += 1
 
 
 def main(args=None) -> int:
-    """Play a bag; exit 0 at its end, 1 when it cannot start."""
-    rclpy.init(args=args)
+    """Play a bag; exit 0 at its end or on a signal, 1 when it cannot start or the bag is bad."""
+    logger = rclpy.logging.get_logger('replay')
     node = None
     try:
         try:
+            rclpy.init(args=args)
+        except _rclpy.RCLError as err:
+            # A bad --params-file or --ros-args; rcl has logged its own line already.
+            logger.fatal(f'cannot start: {str(err).splitlines()[0]}')
+            return 1
+        try:
             node = ReplayNode()
         except STARTUP_ERRORS as err:
-            rclpy.logging.get_logger('replay').fatal(f'cannot start: {err}')
+            logger.fatal(f'cannot start: {err}')
             return 1
         while rclpy.ok() and not node.finished.is_set():
             rclpy.spin_once(node, timeout_sec=0.1)
@@ -207,8 +236,10 @@ def main(args=None) -> int:
     finally:
         if node is not None:
             node.destroy_node()
+            # Not through the node: after a signal its /rosout publisher is invalid.
+            logger.info(node.summary())
         rclpy.try_shutdown()
-    return 0
+    return 1 if node is not None and node.error else 0
 
 
 if __name__ == '__main__':

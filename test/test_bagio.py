@@ -17,11 +17,16 @@
 import os
 from pathlib import Path
 
-from pseudo_stereo_ros.bagio import (bag_cameras, BagError, image_point_topic, iter_raw,
+import numpy as np
+from pseudo_stereo_ros import messages
+from pseudo_stereo_ros.bagio import (bag_cameras, bag_message_counts, BagError, image_message,
+                                     image_point_topic, iter_raw, point_message,
                                      read_observations, read_positions, typestore,
                                      write_estimates, write_observations)
 from pseudo_stereo_ros.cli import main
 from pseudo_stereo_ros.fusion import Estimate, Observation
+from pseudo_stereo_ros.stamps import (ns_to_sec_nanosec, sec_nanosec_to_ns, stamp_fields,
+                                      stamp_ns)
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -57,6 +62,37 @@ def test_estimates_round_trip(tmp_path):
     assert positions == [(e.stamp_ns, e.x, e.y, e.z) for e in estimates]
     topics = {topic for topic, *_ in iter_raw(tmp_path / 'est')}
     assert topics == {'/ball/position'}
+
+
+STAMPS = [0, 1, 999_999_999, 1_000_000_000, 1_000_000_001, 1_721_679_791_176_049_240,
+          (2 ** 31 - 1) * 1_000_000_000 + 999_999_999]
+
+
+@pytest.mark.parametrize('stamp', STAMPS)
+def test_one_stamp_split_for_bags_and_messages(stamp):
+    """The rosbags messages of bagio and the rclpy messages of messages.py carry one layout."""
+    sec, nanosec = ns_to_sec_nanosec(stamp)
+    assert 0 <= nanosec < 1_000_000_000 and sec_nanosec_to_ns(sec, nanosec) == stamp
+    assert stamp_fields(stamp) == {'sec': sec, 'nanosec': nanosec}
+    bag_point = point_message(stamp, 'cam', 1.0, 2.0, 0.0)
+    bag_image = image_message(stamp, 'cam', np.zeros((2, 3), np.uint8), 'mono8')
+    ros_stamp = messages.ns_to_stamp(stamp)
+    for stamp_msg in (bag_point.header.stamp, bag_image.header.stamp):
+        assert (stamp_msg.sec, stamp_msg.nanosec) == (ros_stamp.sec, ros_stamp.nanosec)
+        assert stamp_ns(stamp_msg) == messages.stamp_to_ns(ros_stamp) == stamp
+    assert isinstance(messages.stamp_to_ns(ros_stamp), int)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_message_counts_come_from_the_index(tmp_path, storage):
+    write_observations(tmp_path / 'bag', _observations(), storage=storage)
+    assert bag_message_counts(tmp_path / 'bag') == {
+        '/cam_a/ball/image_point': ('geometry_msgs/msg/PointStamped', 5),
+        '/cam_b/ball/image_point': ('geometry_msgs/msg/PointStamped', 4)}
+    assert bag_message_counts(tmp_path / 'bag', ['/cam_b/ball/image_point']) == {
+        '/cam_b/ball/image_point': ('geometry_msgs/msg/PointStamped', 4)}
+    with pytest.raises(BagError, match='no topic /cam_c/ball/image_point'):
+        bag_message_counts(tmp_path / 'bag', ['/cam_c/ball/image_point'])
 
 
 def test_refuses_to_overwrite(tmp_path):
