@@ -18,7 +18,10 @@
 Default: two virtual cameras (30 fps, camera 2 delayed by 1/60 s), a
 detector per camera, the fuser and the monitor, composed in one executor.
 ``--real`` runs only the detectors and the fuser on real camera topics
-(``/<name>/image_raw``).  Parameters come from ``config/bringup.yaml``
+(``/<name>/image_raw``); it needs the real cameras' calibrations, from
+``--calibration NAME=FILE`` per camera or the fuser's ``calibration_files``
+in the params file (it refuses to start on the simulated rig's
+calibration).  Parameters come from ``config/bringup.yaml``
 (or ``--params-file``); the options here override them.  With
 ``--duration`` it stops by itself, prints the monitor's summary and can
 write a plot (``--plot``).
@@ -40,7 +43,7 @@ from .detector_node import DetectorNode
 from .fuser_node import FuserNode
 from .fusion import METHODS
 from .monitor_node import MonitorNode
-from .node_tools import STARTUP_ERRORS
+from .node_tools import init_context, STARTUP_ERRORS
 from .simulation import config_dir, SCENARIOS
 from .virtual_camera_node import VirtualCameraNode
 
@@ -55,6 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='no virtual cameras: detectors and fuser on /<name>/image_raw')
     parser.add_argument('--cameras', nargs='+', default=['camera1', 'camera2'],
                         help='camera names (default: camera1 camera2)')
+    parser.add_argument('--calibration', action='append', default=[], metavar='NAME=FILE',
+                        help="a camera's calibration YAML, once per camera (overrides the "
+                             "fuser's calibration_files; required with --real unless the "
+                             'params file gives calibration_files; without --real the virtual '
+                             'cameras render with it too)')
     parser.add_argument('--scenario', choices=sorted(SCENARIOS), default=None,
                         help='trajectory of the virtual cameras (default: the params file)')
     parser.add_argument('--method', choices=METHODS, default=None,
@@ -70,17 +78,36 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _nodes(options, context) -> list:
+def _calibrations(options) -> dict:
+    """Return ``{camera name: file}`` from ``--calibration NAME=FILE``; raise ValueError."""
+    files = {}
+    for item in options.calibration:
+        name, sep, path = item.partition('=')
+        if not sep or not name or not path:
+            raise ValueError(f'--calibration {item}: expected NAME=FILE')
+        if name not in options.cameras:
+            raise ValueError(f'--calibration {item}: {name} is not one of --cameras '
+                             f'{" ".join(options.cameras)}')
+        if name in files:
+            raise ValueError(f'--calibration: {name} given twice')
+        files[name] = path
+    if files and set(files) != set(options.cameras):
+        missing = [name for name in options.cameras if name not in files]
+        raise ValueError(f'--calibration: none for {", ".join(missing)} (give one per camera)')
+    return files
+
+
+def _nodes(options, context, calibrations: dict, nodes: list) -> None:
+    """Create the nodes into ``nodes`` (so the caller destroys those made before an error)."""
     names = options.cameras
     # Parameter services multiply the executor's wait set; bringup's nodes are set by files.
     common = {'context': context, 'start_parameter_services': False}
-    nodes = []
     if not options.real:
         fps, epoch = 30.0, time.time_ns() + 500_000_000
         epoch -= epoch % 1_000_000  # a round millisecond, easy to read in stamps
         for index, name in enumerate(names):
-            overrides = [Parameter('calibration_file', value=str(config_dir() / 'rig'
-                                                                 / f'{name}.yaml')),
+            rig_file = calibrations.get(name, str(config_dir() / 'rig' / f'{name}.yaml'))
+            overrides = [Parameter('calibration_file', value=rig_file),
                          Parameter('phase_s', value=index / (fps * len(names))),
                          Parameter('epoch_ns', value=epoch),
                          Parameter('seed', value=index)]
@@ -91,14 +118,23 @@ def _nodes(options, context) -> list:
     for name in names:
         nodes.append(DetectorNode(namespace=name, **common))
     fuser_overrides = [Parameter('camera_names', value=list(names))]
+    if calibrations:
+        fuser_overrides.append(Parameter('calibration_files',
+                                         value=[calibrations[name] for name in names]))
     if options.method:
         fuser_overrides.append(Parameter('method', value=options.method))
-    nodes.append(FuserNode(parameter_overrides=fuser_overrides, **common))
+    fuser = FuserNode(parameter_overrides=fuser_overrides, **common)
+    nodes.append(fuser)
+    if options.real and fuser.default_calibration:
+        # The fuser's default is the simulated rig: real cameras would be fused with a wrong
+        # geometry, silently.
+        raise ValueError("--real needs the real cameras' calibrations: give --calibration "
+                         'NAME=FILE per camera, or calibration_files in the fuser section of '
+                         'the params file')
     if not options.real:
         nodes.append(MonitorNode(parameter_overrides=[Parameter('camera_names',
                                                                 value=list(names))],
                                  **common))
-    return nodes
 
 
 def write_plot(monitor: MonitorNode, path: str) -> None:
@@ -193,14 +229,20 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not os.path.isfile(params_file):
         print(f'bringup: error: --params-file {params_file}: no such file', file=sys.stderr)
         return 2
+    try:
+        calibrations = _calibrations(options)
+    except ValueError as err:
+        print(f'bringup: error: {err}', file=sys.stderr)
+        return 2
     context = rclpy.Context()
-    rclpy.init(args=['bringup', '--ros-args', '--params-file', params_file] + ros_args[1:],
-               context=context)
+    if not init_context(['bringup', '--ros-args', '--params-file', params_file] + ros_args[1:],
+                        context=context, name='bringup'):
+        return 1
     nodes = []
     executor = None
     try:
         try:
-            nodes = _nodes(options, context)
+            _nodes(options, context, calibrations, nodes)
         except STARTUP_ERRORS as err:
             print(f'bringup: error: cannot start: {err}', file=sys.stderr)
             return 1

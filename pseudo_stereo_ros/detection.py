@@ -45,7 +45,7 @@ __all__ = ['BallDetector', 'CHOICES', 'COLOR_ENCODINGS', 'ENCODING_CHANNELS', 'E
 
 #: Blob choice policies.
 CHOICES = ('largest', 'nearest')
-#: Colour encodings -> OpenCV conversion to HSV (alpha, if any, is dropped first).
+#: Colour encodings -> OpenCV conversion to HSV (takes 3 or 4 channels; alpha is ignored).
 COLOR_ENCODINGS = {
     'rgb8': cv2.COLOR_RGB2HSV,
     'bgr8': cv2.COLOR_BGR2HSV,
@@ -76,7 +76,8 @@ def image_array(data, height: int, width: int, step: int, encoding: str) -> np.n
     :param step: bytes per row, padding included
     :param encoding: one of :data:`ENCODING_CHANNELS`
     :return: (H, W) uint8 for mono8, (H, W, C) uint8 in the encoding's channel order
-    :raises EncodingError: unsupported encoding, or ``step``/``data`` inconsistent with the size
+    :raises EncodingError: unsupported encoding, an empty image (no rows or no columns), or
+        ``step``/``data`` inconsistent with the size
     """
     channels = ENCODING_CHANNELS.get(encoding)
     if channels is None:
@@ -85,6 +86,9 @@ def image_array(data, height: int, width: int, step: int, encoding: str) -> np.n
     height, width, step = int(height), int(width), int(step)
     if height < 0 or width < 0:
         raise EncodingError(f'negative image size {width} x {height}')
+    if height == 0 or width == 0:
+        # OpenCV asserts on empty images (cv2.error, not a ValueError): refuse them here.
+        raise EncodingError(f'empty image ({width} x {height} px)')
     row_bytes = width * channels
     if step < row_bytes:
         raise EncodingError(f'step {step} is less than width x channels = {row_bytes}')
@@ -155,6 +159,7 @@ class BallDetector:
                         if size > 1 else None)
         self._dilate = cv2.getStructuringElement(cv2.MORPH_RECT,
                                                  (2 * _MARGIN_PX + 1, 2 * _MARGIN_PX + 1))
+        self._ring_kernel = np.ones((3, 3), np.uint8)
         #: The last detection (u, v) [px], or None.
         self.last: Optional[Tuple[float, float]] = None
         #: Counts: ``frames``, ``detections``, ``no_ball``, ``window_hits``, ``window_misses``.
@@ -171,7 +176,8 @@ class BallDetector:
         :param image: (H, W) uint8 for mono8, (H, W, 3 or 4) uint8 in the encoding's order
         :param encoding: one of :data:`ENCODINGS`
         :return: the centroid (u, v) in raw pixels, or None when there is no ball
-        :raises ValueError: an unknown encoding or an image whose shape does not fit it
+        :raises ValueError: an unknown encoding, an empty image, or an image whose shape does
+            not fit the encoding
         """
         if encoding not in ENCODINGS:
             raise ValueError(f'unsupported encoding {encoding!r} (supported: '
@@ -181,6 +187,8 @@ class BallDetector:
                 (channels > 1 and image.shape[2] != channels):
             raise ValueError(f'image of shape {image.shape} and type {image.dtype} does not '
                              f'fit encoding {encoding!r}')
+        if image.size == 0:
+            raise ValueError(f'empty image of shape {image.shape}')
         self.stats['frames'] += 1
         height, width = image.shape[:2]
         result = None
@@ -208,9 +216,9 @@ class BallDetector:
     def _mask(self, image: np.ndarray, encoding: str) -> np.ndarray:
         if encoding == 'mono8':
             return cv2.threshold(image, self.mono_threshold - 1, 255, cv2.THRESH_BINARY)[1]
-        if image.shape[2] == 4:
-            image = image[:, :, :3]
-        hsv = cv2.cvtColor(np.ascontiguousarray(image), COLOR_ENCODINGS[encoding])
+        # The conversion reads 3 or 4 channels and strided views (a search window) as they
+        # are: no copy of the frame.
+        hsv = cv2.cvtColor(image, COLOR_ENCODINGS[encoding])
         mask = None
         for lower, upper in self._ranges:
             part = cv2.inRange(hsv, lower, upper)
@@ -259,8 +267,9 @@ class BallDetector:
             colour = patch[:, :, :3]
             signal = (colour.max(axis=2).astype(np.float32)
                       - colour.min(axis=2).astype(np.float32))
-        near = cv2.dilate(blob.astype(np.uint8), self._dilate).astype(bool)
-        ring = near & ~cv2.dilate(blob.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        blob = blob.astype(np.uint8)
+        near = cv2.dilate(blob, self._dilate).astype(bool)
+        ring = near & ~cv2.dilate(blob, self._ring_kernel).astype(bool)
         # Background level: the outer ring of the margin, beyond the blob's anti-aliased edge.
         level = float(np.median(signal[ring])) if ring.any() else 0.0
         weight = np.where(near, np.clip(signal - level, 0.0, None), 0.0).astype(np.float32)

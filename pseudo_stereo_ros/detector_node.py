@@ -24,6 +24,7 @@ namespace: ``/camera1/image_raw`` -> ``/camera1/ball/image_point``.
 from collections import Counter, deque
 import time
 
+import cv2
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
@@ -98,9 +99,10 @@ class DetectorNode(Node):
             pixels = image_to_array(msg)
             start = time.perf_counter()
             found = self.detector.detect(pixels, msg.encoding)
-        except (EncodingError, ValueError) as err:
+        except (EncodingError, ValueError, cv2.error) as err:
+            # cv2.error: a last guard for images OpenCV refuses that the checks above let by.
             self.stats['bad_image'] += 1
-            self._throttled_error('bad_image', f'image dropped: {err}')
+            self._throttled_error('bad_image', f'image dropped: {str(err).strip()}')
             return
         self.detect_times_s.append(time.perf_counter() - start)
         if found is None:

@@ -21,6 +21,10 @@ becomes an :class:`~pseudo_stereo_ros.fusion.Observation`, a
 :class:`~pseudo_stereo_ros.reorder.ReorderBuffer` puts the topics back into
 stamp order (holding a point at most ``reorder_window_s``), and every
 estimate is published stamped with the shutter stamp of its event.
+
+A point older than the newest fused one by more than ``max_gap_s`` (a
+replayed bag looping, a restarted clock) starts a new session: the reorder
+buffer and the timing statistics start afresh, as the core fuser does.
 """
 
 from collections import Counter, deque
@@ -32,7 +36,7 @@ from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from visualization_msgs.msg import Marker
 
-from .fusion import Fuser, METHODS, Observation
+from .fusion import DROP_REASONS, Fuser, METHODS, Observation
 from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
                        point_to_observation, trail_marker)
 from .node_tools import declare, load_cameras, run_node, StartupError
@@ -86,8 +90,13 @@ class FuserNode(Node):
         diagnostics_period_s = declare(self, 'diagnostics_period_s', 1.0,
                                        'period of /diagnostics [s]; 0 disables',
                                        min_value=0.0)
+        if not self.world_frame:
+            raise StartupError('parameter world_frame: must not be empty (the frame_id of '
+                               '/ball/position, e.g. world)')
         if files == [''] or files == []:
             files = []
+        #: True when the calibrations are the simulated rig's (calibration_files not given).
+        self.default_calibration = not files
         self.cameras = load_cameras(names, files)
         try:
             self.fuser = Fuser(self.cameras, method=method,
@@ -97,13 +106,21 @@ class FuserNode(Node):
             if isinstance(err, StartupError):
                 raise
             raise StartupError(f'parameters sync_tolerance_s / max_gap_s: {err}') from err
-        self.buffer = ReorderBuffer(_seconds_to_ns('reorder_window_s', window_s), sources=names)
+        self._names = list(names)
+        self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
+        self._max_gap_ns = self.fuser.max_gap_ns
+        self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
+        #: Counts: ``late`` (points older than one already fused, over all sessions),
+        #: ``sessions`` (new sessions after time jumped back).
+        self.node_stats = Counter()
         #: Seconds from a point's arrival to its estimate's publication (no hold), recent ones.
         self.processing_times_s = deque(maxlen=10_000)
         self._inputs = Counter()
         self._inputs_reported = Counter()
         self._last_stamp = {}
         self._deltas = {}  # 'camera1->camera2' -> (count, sum ns, last ns)
+        self._delta_keys = {(a, b): f'{a}->{b}' for a in names for b in names if a != b}
+        self._newest_fused_ns = None
         self._trail = deque(maxlen=trail_length)
         self._newest_ns = None
         self._reported_at = time.monotonic()
@@ -133,8 +150,13 @@ class FuserNode(Node):
         start = time.perf_counter()
         self._inputs[name] += 1
         observation = point_to_observation(msg, name)
+        newest = self._newest_fused_ns
+        if newest is not None and newest - observation.stamp_ns > self._max_gap_ns:
+            self._new_session()
+        late_before = self.buffer.stats['late']
         released = self.buffer.push(observation.stamp_ns, name, observation,
                                     time.monotonic_ns())
+        self.node_stats['late'] += self.buffer.stats['late'] - late_before
         for item in released:
             self._process(item)
         if released and released[-1] is observation:
@@ -148,11 +170,22 @@ class FuserNode(Node):
         if not len(self.buffer):
             self._flush_timer.cancel()
 
+    def _new_session(self) -> None:
+        """Time jumped back beyond max_gap: fuse what is held, then start over."""
+        for item in self.buffer.flush():
+            self._process(item)
+        self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
+        self._last_stamp.clear()
+        self._newest_fused_ns = None
+        self.node_stats['sessions'] += 1
+
     def _process(self, observation: Observation) -> None:
         name, stamp = observation.camera, observation.stamp_ns
+        if self._newest_fused_ns is None or stamp > self._newest_fused_ns:
+            self._newest_fused_ns = stamp
         for other, other_stamp in self._last_stamp.items():
             if other != name and other_stamp < stamp:
-                key = f'{other}->{name}'
+                key = self._delta_keys[other, name]
                 count, total, _ = self._deltas.get(key, (0, 0, 0))
                 self._deltas[key] = (count + 1, total + stamp - other_stamp, stamp - other_stamp)
         if stamp > self._last_stamp.get(name, -1):
@@ -187,10 +220,15 @@ class FuserNode(Node):
             values[f'delta {key} last [ms]'] = last / 1e6
         values['observations'] = stats['observations']
         values['estimates'] = estimates
-        for key, value in sorted(stats.items()):
-            if key not in ('observations', 'estimates'):
-                values[f'dropped: {key}' if key != 'resets' else 'resets'] = value
-        values['late (after reorder window)'] = self.buffer.stats['late']
+        # Every observation gives an estimate or exactly one drop reason; 'late' and 'resets'
+        # are not drops (a late point is still estimated when the method can).
+        for key in DROP_REASONS:
+            if stats[key]:
+                values[f'dropped: {key}'] = stats[key]
+        values['resets'] = stats['resets']
+        values['late (older than a fused point, after the reorder window)'] = \
+            self.node_stats['late']
+        values['new sessions (time jumped back)'] = self.node_stats['sessions']
         inputs = sum(self._inputs.values())
         if inputs and not estimates:
             level, message = 'warn', 'receiving image points but no estimates yet'

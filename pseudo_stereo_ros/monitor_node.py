@@ -23,6 +23,11 @@ paper's method and of the naive pairing are compared on the same
 detections.  Latency is the wall-clock time of receiving ``/ball/position``
 minus its stamp (meaningful when the cameras stamp with the wall clock, as
 the virtual cameras do).
+
+Every store (estimates, ground truth, latencies) keeps only its newest
+``max_history`` entries, so a monitor left running uses bounded memory; the
+default holds more than 25 minutes of two 30 fps cameras, and the summary
+is then over that most recent stretch.
 """
 
 from collections import Counter, deque
@@ -42,7 +47,10 @@ from .messages import point_to_observation, point_to_xyz
 from .node_tools import declare, load_cameras, run_node
 from .reorder import ReorderBuffer
 
-__all__ = ['MonitorNode', 'main']
+__all__ = ['DEFAULT_MAX_HISTORY', 'MonitorNode', 'main']
+
+#: Default of the ``max_history`` parameter: entries kept per store.
+DEFAULT_MAX_HISTORY = 100_000
 
 
 def _percentiles(latency_ns) -> tuple:
@@ -51,6 +59,13 @@ def _percentiles(latency_ns) -> tuple:
     if not latency.size:
         return (math.nan,) * 3
     return tuple(float(x) for x in np.percentile(latency, (50, 90, 99)))
+
+
+def _remember(store: dict, stamp_ns: int, value, limit: int) -> None:
+    """Store ``value`` at ``stamp_ns``; drop the first-inserted entries beyond ``limit``."""
+    store[stamp_ns] = value
+    while len(store) > limit:
+        del store[next(iter(store))]
 
 
 class MonitorNode(Node):
@@ -74,6 +89,10 @@ class MonitorNode(Node):
                                        min_value=0.0)
         compare = declare(self, 'compare_naive', True,
                           'also fuse the image points with the naive method', read_only=True)
+        self.max_history = declare(self, 'max_history', DEFAULT_MAX_HISTORY,
+                                   'entries kept per store (estimates of each method, ground '
+                                   'truth, each latency series); the oldest go first',
+                                   min_value=1, read_only=True)
         self.names = list(names or [])
         files = [] if files in ([''], None) else files
         self.naive = None
@@ -86,8 +105,8 @@ class MonitorNode(Node):
         self.truth: Dict[int, tuple] = {}
         self.paper: Dict[int, tuple] = {}
         self.naive_estimates: Dict[int, tuple] = {}
-        self.latency_ns = deque(maxlen=100_000)
-        self.point_latency_ns = deque(maxlen=100_000)
+        self.latency_ns = deque(maxlen=self.max_history)
+        self.point_latency_ns = deque(maxlen=self.max_history)
         self._recent_error = deque(maxlen=300)
         self._started = time.monotonic()
         self._subs = []
@@ -124,21 +143,22 @@ class MonitorNode(Node):
         for item in self._buffer.push(observation.stamp_ns, name, observation, 0):
             estimate = self.naive.update(item)
             if estimate is not None:
-                self.naive_estimates[estimate.stamp_ns] = (estimate.x, estimate.y, estimate.z)
+                _remember(self.naive_estimates, estimate.stamp_ns,
+                          (estimate.x, estimate.y, estimate.z), self.max_history)
 
     def _on_position(self, msg: PointStamped) -> None:
         received = time.time_ns()
         self._count('ball/position')
         stamp, x, y, z = point_to_xyz(msg)
         self.latency_ns.append(received - stamp)
-        self.paper[stamp] = (x, y, z)
+        _remember(self.paper, stamp, (x, y, z), self.max_history)
         truth = self.truth.get(stamp)
         if truth is not None:
             self._recent_error.append(math.dist(truth, (x, y, z)))
 
     def _on_truth(self, msg: PointStamped) -> None:
         stamp, x, y, z = point_to_xyz(msg)
-        self.truth[stamp] = (x, y, z)
+        _remember(self.truth, stamp, (x, y, z), self.max_history)
 
     def rate_hz(self, key: str) -> float:
         """Return the mean rate [Hz] of a counted topic (0 when fewer than two messages)."""
@@ -159,7 +179,9 @@ class MonitorNode(Node):
 
         :return: ``rates`` (topic -> Hz), ``error_mm`` (method -> mean 3D error [mm]),
             ``matched`` (method -> estimates with truth), ``latency_ms`` (p50, p90, p99 of
-            image stamp -> /ball/position), ``point_latency_ms`` (the same for image points)
+            image stamp -> /ball/position), ``point_latency_ms`` (the same for image points);
+            errors and latencies are over the kept (newest ``max_history``) entries, rates
+            over the whole run
         """
         rates = {f'{name} camera': self.rate_hz(f'{name}/camera_info') for name in self.names}
         rates.update({f'{name} image points': self.rate_hz(f'{name}/ball/image_point')

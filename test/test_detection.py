@@ -20,7 +20,7 @@ import sys
 import cv2
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.detection import BallDetector
+from pseudo_stereo_ros.detection import BallDetector, ENCODING_CHANNELS, EncodingError, image_array
 from pseudo_stereo_ros.rendering import BallRenderer
 from pseudo_stereo_ros.simulation import default_rig, look_at_calibration
 import pytest
@@ -75,6 +75,26 @@ def test_every_colour_encoding_gives_the_same_centroid(encoding):
     reference = BallDetector(search_window_px=0).detect(image, 'bgr8')
     found = BallDetector(search_window_px=0).detect(_convert(image, encoding), encoding)
     np.testing.assert_allclose(found, reference, atol=1e-9)
+    # The search window hands the converter a strided view of the frame (4 channels: alpha
+    # included): the same centroid again.
+    windowed = BallDetector(search_window_px=30)
+    windowed.last = tuple(np.add(reference, (3.0, -2.0)))
+    np.testing.assert_allclose(windowed.detect(_convert(image, encoding), encoding), reference,
+                               atol=1e-9)
+    assert windowed.stats['window_hits'] == 1
+
+
+@pytest.mark.parametrize('encoding', sorted(ENCODING_CHANNELS))
+@pytest.mark.parametrize('height, width', [(0, 0), (0, 640), (480, 0)])
+def test_empty_image_is_refused_as_a_bad_image(encoding, height, width):
+    # OpenCV asserts (cv2.error) on empty images: they must be refused before, as bad input.
+    step = width * ENCODING_CHANNELS[encoding]
+    with pytest.raises(EncodingError, match='empty image'):
+        image_array(b'', height, width, step, encoding)
+    channels = ENCODING_CHANNELS[encoding]
+    shape = (height, width) if channels == 1 else (height, width, channels)
+    with pytest.raises(ValueError, match='empty image'):
+        BallDetector().detect(np.zeros(shape, np.uint8), encoding)
 
 
 def test_mono8_brightness_threshold():

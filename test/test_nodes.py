@@ -18,14 +18,17 @@ import itertools
 import os
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
+from pseudo_stereo_ros import bringup
 from pseudo_stereo_ros.calibration import CalibrationError, save_calibration
 from pseudo_stereo_ros.detector_node import DetectorNode
 from pseudo_stereo_ros.fuser_node import FuserNode
 from pseudo_stereo_ros.fusion import fuse
-from pseudo_stereo_ros.messages import (array_to_image, image_to_array, observation_to_point,
-                                        point_to_xyz, stamp_to_ns)
+from pseudo_stereo_ros.messages import (array_to_image, estimate_to_point, image_to_array,
+                                        observation_to_point, point_to_xyz, stamp_to_ns)
+from pseudo_stereo_ros.monitor_node import MonitorNode
 from pseudo_stereo_ros.node_tools import StartupError
 from pseudo_stereo_ros.rendering import BallRenderer
 from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
@@ -33,10 +36,12 @@ from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, default_rig, make_sc
 from pseudo_stereo_ros.virtual_camera_node import VirtualCameraNode
 import pytest
 import rclpy
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import Marker
 
 _COUNTER = itertools.count()
 
@@ -98,7 +103,8 @@ def _feed_points(harness, observations, received, *, burst=False):
     fuser = harness.nodes[0]
     for count, observation in enumerate(observations, 1):
         publishers[observation.camera].publish(observation_to_point(observation))
-        if not burst:
+        # Bursts of at most 50: half the fuser's subscription depth, whatever the scenario.
+        if not burst or count % 50 == 0:
             assert harness.spin_until(lambda: fuser.fuser.stats['observations'] >= count)
     assert harness.spin_until(lambda: fuser.fuser.stats['observations'] >= len(observations))
     harness.spin_for(0.05)  # the reorder window's last hold
@@ -161,6 +167,7 @@ def test_fuser_node_stops_on_a_stale_camera_and_resumes(context, namespace):
     ([Parameter('method', value='best')], 'method'),
     ([Parameter('calibration_files', value=['a.yaml'])], 'calibration_files'),
     ([Parameter('sync_tolerance_s', value=0.2)], 'max_gap'),
+    ([Parameter('world_frame', value='')], 'world_frame'),
 ])
 def test_fuser_rejects_bad_parameters(context, namespace, overrides, match):
     with pytest.raises(StartupError, match=match):
@@ -172,9 +179,15 @@ def test_fuser_rejects_a_malformed_calibration_file(context, namespace, tmp_path
     bad = tmp_path / 'camera2.yaml'
     save_calibration(default_rig()[0].calibration, good)
     bad.write_text('camera_name: camera2\nimage_width: 640\nimage_height: 480\n')
-    with pytest.raises(CalibrationError, match="camera2.yaml: key 'camera_matrix'"):
+    # The message names the parameter entry, the file and the key.
+    with pytest.raises(StartupError, match=r'parameter calibration_files\[1\] \(camera camera2\)'
+                       r": .*camera2.yaml: key 'camera_matrix'") as error:
         FuserNode(context=context, namespace=namespace, parameter_overrides=[
             Parameter('calibration_files', value=[str(good), str(bad)])])
+    assert isinstance(error.value.__cause__, CalibrationError)
+    with pytest.raises(StartupError, match=r'calibration_files\[0\] \(camera camera1\): .*none'):
+        FuserNode(context=context, namespace=namespace, parameter_overrides=[
+            Parameter('calibration_files', value=[str(tmp_path / 'none.yaml'), str(good)])])
 
 
 def _image_publisher(harness):
@@ -197,11 +210,14 @@ def test_detector_node_publishes_the_centroid_with_the_image_header(context, nam
         image = array_to_image(renderer.render(position), 'bgr8', stamp, 'camera1_optical')
         publisher.publish(image)
         assert harness.spin_until(lambda: len(points) == 1)
-        # Wrong encoding: dropped, counted, and the node keeps working.
+        # Wrong encoding, and empty images (OpenCV asserts on them): dropped, counted, and the
+        # node keeps working.
         bad = Image(header=image.header, height=480, width=640, encoding='16UC1', step=1280)
         bad.data = bytes(1280 * 480)
         publisher.publish(bad)
-        assert harness.spin_until(lambda: detector.stats['bad_image'] == 1)
+        publisher.publish(Image(header=image.header, encoding='bgr8'))
+        publisher.publish(Image(header=image.header, height=480, width=0, encoding='mono8'))
+        assert harness.spin_until(lambda: detector.stats['bad_image'] == 3)
         # A frame without a ball: counted, nothing published.
         publisher.publish(array_to_image(renderer.render(None), 'bgr8', stamp + 1, 'c'))
         assert harness.spin_until(lambda: detector.stats['no_ball'] == 1)
@@ -216,7 +232,7 @@ def test_detector_node_publishes_the_centroid_with_the_image_header(context, nam
     assert np.hypot(points[0].point.x - truth[0], points[0].point.y - truth[1]) < 0.25
     assert points[0].point.z == 0.0
     assert len(points) == 2 and stamp_to_ns(points[1].header.stamp) == stamp + 2
-    assert detector.stats['images'] == 4 and detector.stats['published'] == 2
+    assert detector.stats['images'] == 6 and detector.stats['published'] == 2
 
 
 def test_detector_rejects_bad_parameters(context, namespace):
@@ -258,3 +274,220 @@ def test_virtual_camera_stamps_frames_at_exact_shutter_times(context, namespace)
         assert msg.encoding == 'bgr8' and (msg.width, msg.height) == (640, 480)
     pixels = image_to_array(images[-1])
     assert pixels.shape == (480, 640, 3)
+
+
+def test_monitor_keeps_only_the_newest_max_history_entries(context, namespace):
+    # A monitor left running must not grow without bound: every store keeps its newest entries.
+    limit = 5
+    cameras, run, observations = _observations()
+    paper, _ = fuse(cameras, observations)
+    naive, _ = fuse(cameras, observations, method='naive')
+    monitor = MonitorNode(context=context, namespace=namespace, parameter_overrides=[
+        Parameter('max_history', value=limit), Parameter('report_period_s', value=0.0)])
+    harness = Harness(context, namespace, monitor)
+    try:
+        points = {name: harness.probe.create_publisher(PointStamped, f'{name}/ball/image_point',
+                                                       500) for name in ('camera1', 'camera2')}
+        position = harness.probe.create_publisher(PointStamped, 'ball/position', 500)
+        truth = harness.probe.create_publisher(PointStamped, '/ball/ground_truth', 500)
+        assert harness.spin_until(lambda: all(p.get_subscription_count() for p in
+                                              [*points.values(), position, truth]))
+        for count, observation in enumerate(observations, 1):
+            points[observation.camera].publish(observation_to_point(observation))
+            assert harness.spin_until(lambda: sum(
+                monitor.counts[f'{name}/ball/image_point'] for name in points) >= count)
+        true_points = truth_at(run, [e.stamp_ns for e in paper])
+        for estimate, true_point in zip(paper, true_points):
+            truth.publish(estimate_to_point(estimate._replace(x=true_point[0], y=true_point[1],
+                                                              z=true_point[2]), 'world'))
+            position.publish(estimate_to_point(estimate, 'world'))
+        assert harness.spin_until(lambda: monitor.counts['ball/position'] >= len(paper)
+                                  and paper[-1].stamp_ns in monitor.truth)
+        summary = monitor.summary()
+    finally:
+        harness.close()
+    assert len(paper) > 10 * limit and len(naive) > 10 * limit
+    newest = [e.stamp_ns for e in paper[-limit:]]
+    assert list(monitor.paper) == newest
+    assert list(monitor.truth) == newest
+    assert list(monitor.naive_estimates) == [e.stamp_ns for e in naive[-limit:]]
+    assert len(monitor.latency_ns) == limit and len(monitor.point_latency_ns) == limit
+    assert summary['matched'] == {'paper': limit, 'naive': limit}
+    assert summary['positions'] == len(paper)  # counts (rates) still cover the whole run
+    # The error is the mean over the kept (newest) estimates only.
+    expected_mm = 1e3 * np.linalg.norm(
+        [(e.x, e.y, e.z) for e in paper[-limit:]] - true_points[-limit:], axis=1).mean()
+    assert summary['error_mm']['paper'] == pytest.approx(expected_mm, rel=1e-9)
+
+
+def test_monitor_rejects_max_history_below_one(context, namespace):
+    with pytest.raises(InvalidParameterValueException, match='max_history'):
+        MonitorNode(context=context, namespace=namespace,
+                    parameter_overrides=[Parameter('max_history', value=0)])
+
+
+@pytest.mark.parametrize('throttle_s, logged', [(1000.0, 1), (0.0, 3)])
+def test_detector_throttles_the_bad_image_error(context, namespace, throttle_s, logged):
+    detector = DetectorNode(context=context, namespace=namespace, parameter_overrides=[
+        Parameter('error_throttle_s', value=throttle_s)])
+    errors = []
+
+    class Logger:
+        def error(self, text):
+            errors.append(text)
+
+    detector.get_logger = Logger
+    harness = Harness(context, namespace, detector)
+    try:
+        publisher, _ = _image_publisher(harness)
+        for _ in range(3):
+            publisher.publish(Image(encoding='bgr8'))  # empty
+        assert harness.spin_until(lambda: detector.stats['bad_image'] == 3)
+    finally:
+        harness.close()
+    # One line per throttle period, with the running count; every image is counted.
+    assert len(errors) == logged
+    assert errors[0].startswith('image dropped: empty image') and '(1 so far)' in errors[0]
+
+
+def _diagnostics(msg, name):
+    """Return the values of the status of node ``name`` in a DiagnosticArray, or None."""
+    for status in msg.status:
+        if status.name.startswith(f'{name}: '):
+            return status, {item.key: float(item.value) for item in status.values}
+    return None
+
+
+def _drops(values):
+    return sum(value for key, value in values.items() if key.startswith('dropped: '))
+
+
+def _late(values):
+    """Return the values of every diagnostics key about late points."""
+    return [value for key, value in values.items() if 'late' in key]
+
+
+def test_fuser_publishes_diagnostics_and_the_trail_marker(context, namespace):
+    cameras, _, observations = _observations()
+    name = f'fuser{next(_COUNTER)}'  # /diagnostics is global: a name of this test's own
+    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
+        Parameter('diagnostics_period_s', value=0.05), Parameter('marker_period_s', value=0.05),
+        Parameter('trail_length', value=20)])
+    harness = Harness(context, namespace, fuser)
+    reports, markers = [], []
+    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
+    harness.probe.create_subscription(Marker, 'ball/marker', markers.append, 10)
+    expected, _ = fuse(cameras, observations)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, observations, received)
+        assert harness.spin_until(
+            lambda: any(r and r[1]['estimates'] == len(expected) for r in reports)
+            and any(stamp_to_ns(m.header.stamp) == expected[-1].stamp_ns for m in markers))
+    finally:
+        harness.close()
+    status, values = next(r for r in reports if r and r[1]['estimates'] == len(expected))
+    assert status.level == DiagnosticStatus.OK
+    assert values['observations'] == len(observations)
+    # Every observation gives an estimate or exactly one drop reason.
+    assert values['estimates'] + _drops(values) == len(observations)
+    assert _late(values) == [0]
+    # Camera 2's shutter is 1/60 s after camera 1's, camera 1's next 1/60 s after that.
+    for key in ('camera1->camera2', 'camera2->camera1'):
+        assert values[f'delta {key} mean [ms]'] == pytest.approx(1e3 / 60, abs=1e-3)
+    marker = next(m for m in markers if stamp_to_ns(m.header.stamp) == expected[-1].stamp_ns)
+    assert marker.header.frame_id == 'world' and marker.type == Marker.LINE_STRIP
+    np.testing.assert_allclose([(p.x, p.y, p.z) for p in marker.points],
+                               [(e.x, e.y, e.z) for e in expected[-20:]], rtol=0, atol=1e-9)
+
+
+def test_fuser_counts_a_late_point_once_with_the_default_window(context, namespace):
+    cameras, run, observations = _observations()
+    # Camera 2's point of one event arrives after camera 1's next one (a slower detector).
+    k = next(i for i in range(len(observations) // 2, len(observations) - 1)
+             if observations[i].camera == 'camera2' and observations[i + 1].camera == 'camera1')
+    late = observations[k]
+    arrival = observations[:k] + [observations[k + 1], late] + observations[k + 2:]
+    name = f'fuser{next(_COUNTER)}'
+    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
+        Parameter('diagnostics_period_s', value=0.05)])
+    harness = Harness(context, namespace, fuser)
+    reports = []
+    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, arrival, received)
+        assert harness.spin_until(lambda: any(
+            r and r[1]['observations'] == len(arrival) for r in reports))
+    finally:
+        harness.close()
+    _, values = next(r for r in reports if r and r[1]['observations'] == len(arrival))
+    assert fuser.buffer.window_ns == 0
+    assert values['estimates'] + _drops(values) == len(arrival)  # not counted as a drop
+    assert _late(values) == [1]  # and reported once
+    assert values['estimates'] == len(received)
+    # Not dropped: estimated at its own event, as close to the truth as the other estimates.
+    expected, _ = fuse(cameras, observations)
+    assert sorted(r[0] for r in received) == [e.stamp_ns for e in expected]
+    errors = {r[0]: np.linalg.norm(np.subtract(r[1:], truth_at(run, [r[0]])[0]))
+              for r in received}
+    assert errors[late.stamp_ns] <= max(errors.values())
+    assert errors[late.stamp_ns] < 0.005
+
+
+def test_fuser_starts_a_new_session_when_a_replay_loops(context, namespace):
+    cameras, _, observations = _observations()
+    name = f'fuser{next(_COUNTER)}'
+    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
+        Parameter('diagnostics_period_s', value=0.05)])
+    harness = Harness(context, namespace, fuser)
+    reports = []
+    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
+    looped = observations + observations  # the bag played twice: stamps jump back
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, looped, received)
+        assert harness.spin_until(lambda: any(
+            r and r[1]['observations'] == len(looped) for r in reports))
+    finally:
+        harness.close()
+    expected, _ = fuse(cameras, observations)
+    assert [r[0] for r in received] == [e.stamp_ns for e in expected] * 2
+    np.testing.assert_allclose([r[1:] for r in received],
+                               [(e.x, e.y, e.z) for e in expected] * 2, rtol=0, atol=1e-9)
+    _, values = next(r for r in reports if r and r[1]['observations'] == len(looped))
+    # A new session, not a second pass of late points; the timing statistics stay right.
+    assert _late(values) == [0]
+    assert values['new sessions (time jumped back)'] == 1
+    assert values['delta camera1->camera2 mean [ms]'] == pytest.approx(1e3 / 60, abs=1e-3)
+
+
+def test_bringup_real_refuses_the_simulated_calibration(capsys, tmp_path):
+    assert bringup.main(['--real', '--duration', '2']) == 1  # before: ran on the sim rig
+    assert "--real needs the real cameras' calibrations" in capsys.readouterr().err
+    assert bringup.main(['--real', '--calibration', 'camera1=a.yaml']) == 2
+    assert 'none for camera2' in capsys.readouterr().err
+    assert bringup.main(['--real', '--calibration', 'camera3=a.yaml']) == 2
+    assert 'not one of --cameras' in capsys.readouterr().err
+    # Given per camera (here: files of another rig), the fuser starts with them.
+    rig = [str(tmp_path / f'{name}.yaml') for name in ('camera1', 'camera2')]
+    for camera, path in zip(default_rig(), rig):
+        save_calibration(camera.calibration, path)
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('camera_name: [x\n')
+    assert bringup.main(['--real', '--calibration', f'camera1={rig[0]}',
+                         '--calibration', f'camera2={broken}']) == 1
+    assert 'calibration_files[1] (camera camera2)' in capsys.readouterr().err
+    assert bringup.main(['--real', '--calibration', f'camera1={rig[0]}',
+                         '--calibration', f'camera2={rig[1]}', '--duration', '0.01']) == 0
+
+
+def test_bringup_reports_a_malformed_params_file_in_one_line(capfd, tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('/**/fuser:\n  ros__parameters:\n    method: [paper\n')
+    assert bringup.main(['--params-file', str(bad)]) == 1
+    err = capfd.readouterr().err
+    assert 'cannot start' in err and 'bad.yaml' in err and 'Traceback' not in err

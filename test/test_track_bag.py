@@ -14,6 +14,7 @@
 
 """``pseudo_stereo track --bag``: estimates as from CSV, images through detectors, errors."""
 
+import dataclasses
 import os
 from pathlib import Path
 import re
@@ -231,6 +232,32 @@ def test_image_bag_without_ball_images_is_fine(tmp_path, capsys):
     assert main(['track', '--bag', str(path), *RIG_ARGS, '--output',
                  str(tmp_path / 'e.csv')]) == 0
     assert 'ball found in 1 of 1 images' in capsys.readouterr().err
+
+
+def test_empty_and_wrong_encoding_images_are_counted_not_fatal(tmp_path, capsys):
+    # An empty image made OpenCV assert (cv2.error) and the command crash with a traceback.
+    cameras = default_rig()
+    scenario = make_scenario('spiral')
+    stamps = [int(s) for s in shutter_stamps(30.0, 0.2)[1:4]]
+    items = []
+    for stamp in stamps:
+        position = truth_at(scenario, np.array([stamp]))[0]
+        for camera in cameras:
+            items.append((image_topic(camera.name), IMAGE_TYPE, stamp, image_message(
+                stamp, camera.name, BallRenderer(camera, texture=False).render(position))))
+    good = items[-1][3]
+    empty = dataclasses.replace(good, height=0, width=0, step=0, data=np.zeros(0, np.uint8))
+    wrong = dataclasses.replace(good, encoding='16UC1')
+    late = stamps[-1] + 10_000_000
+    items += [(image_topic('camera2'), IMAGE_TYPE, late, empty),
+              (image_topic('camera2'), IMAGE_TYPE, late + 1, wrong)]
+    path = tmp_path / 'images'
+    write_messages(path, items)
+    assert main(['track', '--bag', str(path), *RIG_ARGS, '--output',
+                 str(tmp_path / 'e.csv')]) == 0
+    err = capsys.readouterr().err
+    assert 'camera1: ball found in 3 of 3 images' in err
+    assert 'camera2: ball found in 3 of 5 images of /camera2/image_raw (2 unusable)' in err
 
 
 @pytest.mark.parametrize('extra, message', [

@@ -28,6 +28,7 @@ PointStamped in ``--world-frame``, stamped with the shutter stamp).
 from pathlib import Path
 import sys
 
+import cv2
 import numpy as np
 import yaml
 
@@ -130,7 +131,7 @@ def _detect(bag, camera: str, parameters: dict, path_for_errors: str) -> tuple:
             continue
         try:
             found = detector.detect(pixels, encoding)
-        except ValueError:  # an image whose shape does not fit its encoding: dropped, counted
+        except (ValueError, cv2.error):  # as the detector node: an image dropped, counted
             bad += 1
             continue
         if found is not None:
