@@ -115,8 +115,7 @@ class VirtualCameraNode(Node):
         # Wait until the first shutter, then tick once per period: ticks follow the shutters.
         first = self.stamp_of(0)
         delay_s = max((first - self.get_clock().now().nanoseconds) / 1e9, 0.0)
-        self._start_timer = self.create_timer(max(delay_s, 1e-4), self._on_start)
-        self._tick_timer = None
+        self._tick_timer = self.create_timer(max(delay_s, 1e-4), self._on_tick)
         self.get_logger().info(
             f'{self.camera.name}: {fps:g} fps, phase {phase_s * 1e3:.3f} ms, scenario '
             f'{scenario!r}, publishing {self._image_pub.topic_name}')
@@ -150,13 +149,11 @@ class VirtualCameraNode(Node):
             truth,
         )
 
-    def _on_start(self) -> None:
-        self._start_timer.cancel()
-        self.destroy_timer(self._start_timer)
-        self._tick_timer = self.create_timer(self.period_ns / 1e9, self._on_tick)
-        self._on_tick()
-
     def _on_tick(self) -> None:
+        # One-shot timers re-armed for the next shutter: a periodic timer drifts against the
+        # stamps and would publish each frame up to a period after its shutter.
+        self._tick_timer.cancel()
+        self.destroy_timer(self._tick_timer)
         now = self.get_clock().now().nanoseconds
         while self.stamp_of(self._next_index) <= now:
             index = self._next_index
@@ -178,6 +175,8 @@ class VirtualCameraNode(Node):
             start = time.perf_counter()
             self._prepare(self._next_index)
             self.render_time_s = time.perf_counter() - start
+        delay_ns = self.stamp_of(self._next_index) - self.get_clock().now().nanoseconds
+        self._tick_timer = self.create_timer(max(delay_ns / 1e9, 1e-4), self._on_tick)
 
 
 def main(args=None) -> int:
