@@ -50,7 +50,7 @@ from rclpy.serialization import deserialize_message
 
 from .bagio import bag_message_counts, BagError, iter_raw
 from .messages import ns_to_stamp
-from .node_tools import declare, STARTUP_ERRORS, StartupError
+from .node_tools import declare, init_context, logger_name, STARTUP_ERRORS, StartupError
 
 __all__ = ['ReplayNode', 'main', 'message_class']
 
@@ -215,22 +215,23 @@ class ReplayNode(Node):
 
 def main(args=None) -> int:
     """Play a bag; exit 0 at its end or on a signal, 1 when it cannot start or the bag is bad."""
-    logger = rclpy.logging.get_logger('replay')
+    name = logger_name('replay', args)
+    logger = rclpy.logging.get_logger(name)
+    if not init_context(args, name=name):  # a bad --params-file or --ros-args: one line
+        return 1
     node = None
     try:
-        try:
-            rclpy.init(args=args)
-        except _rclpy.RCLError as err:
-            # A bad --params-file or --ros-args; rcl has logged its own line already.
-            logger.fatal(f'cannot start: {str(err).splitlines()[0]}')
-            return 1
         try:
             node = ReplayNode()
         except STARTUP_ERRORS as err:
             logger.fatal(f'cannot start: {err}')
             return 1
         while rclpy.ok() and not node.finished.is_set():
-            rclpy.spin_once(node, timeout_sec=0.1)
+            try:
+                rclpy.spin_once(node, timeout_sec=0.1)
+            except _rclpy.RCLError:
+                if rclpy.ok():  # not a signal that shut the context between two waits
+                    raise
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
