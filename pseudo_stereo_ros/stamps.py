@@ -18,8 +18,8 @@ Stamps: integer nanoseconds <-> the ``builtin_interfaces/msg/Time`` fields ``sec
 The core keeps every stamp as integer nanoseconds; a message stamp is the
 pair ``sec`` (int32), ``nanosec`` (uint32, ``0 <= nanosec < 10**9``).  This
 module holds that arithmetic and field layout once, for the two places that
-build messages: :mod:`~pseudo_stereo_ros.messages` (rclpy messages) and
-:mod:`~pseudo_stereo_ros.bagio` (rosbags messages).  Both pass the fields to
+build messages: :mod:`~pseudo_stereo_ros.ros.messages` (rclpy messages) and
+:mod:`~pseudo_stereo_ros.formats.bagio` (rosbags messages).  Both pass the fields to
 their own ``Time`` class; stamps never go through float seconds (a stamp
 near 1.7e18 ns loses ~200 ns as a float).  ROS-free: stdlib only.
 """

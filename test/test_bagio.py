@@ -18,15 +18,14 @@ import os
 from pathlib import Path
 
 import numpy as np
-from pseudo_stereo_ros import messages
-from pseudo_stereo_ros.bagio import (bag_cameras, bag_message_counts, BagError, image_message,
-                                     image_point_topic, iter_raw, point_message,
-                                     read_observations, read_positions, typestore,
-                                     write_estimates, write_observations)
-from pseudo_stereo_ros.cli import main
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.formats.bagio import (bag_cameras, bag_message_counts, BagError,
+                                             image_message, image_point_topic, iter_raw,
+                                             point_message, read_observations, read_positions,
+                                             typestore, write_estimates, write_observations)
 from pseudo_stereo_ros.fusion import Estimate, Observation
-from pseudo_stereo_ros.stamps import (ns_to_sec_nanosec, sec_nanosec_to_ns, stamp_fields,
-                                      stamp_ns)
+from pseudo_stereo_ros.ros import messages
+from pseudo_stereo_ros.stamps import ns_to_sec_nanosec, sec_nanosec_to_ns, stamp_fields, stamp_ns
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 

@@ -27,13 +27,12 @@ import math
 
 import cv2
 import numpy as np
-from pseudo_stereo_ros.calibrate import (calibrate_extrinsics, calibrate_full,
-                                         calibrate_intrinsics, CalibrationFitError)
-from pseudo_stereo_ros.calibration import (CalibrationError, load_calibration,
-                                           save_calibration)
+from pseudo_stereo_ros.calibrate.full import (calibrate_extrinsics, calibrate_full,
+                                              calibrate_intrinsics, CalibrationFitError)
+from pseudo_stereo_ros.calibration import CalibrationError, load_calibration, save_calibration
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.cli import main
-from pseudo_stereo_ros.simulation import look_at_calibration
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.sim.scenarios import look_at_calibration
 import pytest
 
 NOISE_PX = 0.3

@@ -19,14 +19,14 @@ import math
 
 import cv2
 import numpy as np
-from pseudo_stereo_ros.calibrate import epipolar_check
+from pseudo_stereo_ros.calibrate.full import epipolar_check
 from pseudo_stereo_ros.calibration import save_calibration
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.cli import main
-from pseudo_stereo_ros.csv_io import write_observations
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.formats.csv_io import write_observations
 from pseudo_stereo_ros.geometry import epipolar_lines
-from pseudo_stereo_ros.simulation import (default_rig, make_scenario, observe, shutter_stamps,
-                                          truth_at)
+from pseudo_stereo_ros.sim.scenarios import (default_rig, make_scenario, observe, shutter_stamps,
+                                             truth_at)
 import pytest
 
 ANGLE_DEG = 0.5
@@ -155,7 +155,7 @@ def test_cli_errors_exit_2_with_one_line(tmp_path, capsys, unsynchronized, camer
 
 @pytest.mark.parametrize('session', ['n3_p1_v14'])
 def test_real_rig_epipolar_distance(tmp_path, capsys, data_dir, session):
-    bagio = pytest.importorskip('pseudo_stereo_ros.bagio')
+    bagio = pytest.importorskip('pseudo_stereo_ros.formats.bagio')
     folder = data_dir / 'lfg_table_tennis'
     obs = tmp_path / 'obs.csv'
     write_observations(obs, bagio.read_observations(folder / session))

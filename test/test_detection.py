@@ -21,8 +21,8 @@ import cv2
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.detection import BallDetector, ENCODING_CHANNELS, EncodingError, image_array
-from pseudo_stereo_ros.rendering import BallRenderer
-from pseudo_stereo_ros.simulation import default_rig, look_at_calibration
+from pseudo_stereo_ros.sim.rendering import BallRenderer
+from pseudo_stereo_ros.sim.scenarios import default_rig, look_at_calibration
 import pytest
 
 
@@ -197,7 +197,7 @@ def test_renderer_is_seeded_and_follows_the_rig():
 
 
 def test_core_modules_import_without_ros():
-    code = ('import sys; import pseudo_stereo_ros.detection, pseudo_stereo_ros.rendering, '
+    code = ('import sys; import pseudo_stereo_ros.detection, pseudo_stereo_ros.sim.rendering, '
             'pseudo_stereo_ros.reorder; '
             "bad = [m for m in sys.modules if m.startswith(('rclpy', 'sensor_msgs', "
             "'geometry_msgs'))]; print(bad); sys.exit(1 if bad else 0)")

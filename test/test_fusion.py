@@ -28,11 +28,11 @@ import math
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.fusion import estimates_to_array, fuse, Fuser, Observation
-from pseudo_stereo_ros.geometry import (epipolar_lines, nearest_point_on_line,
-                                        project_onto_lines, triangulate_rays)
-from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
-                                          make_scenario, observe, Scenario, shutter_stamps,
-                                          truth_at)
+from pseudo_stereo_ros.geometry import (epipolar_lines, nearest_point_on_line, project_onto_lines,
+                                        triangulate_rays)
+from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
+                                             make_scenario, observe, Scenario, shutter_stamps,
+                                             truth_at)
 import pytest
 
 SPEED = 3.0  # m/s, the paper's uniform motions

@@ -20,7 +20,7 @@ from pseudo_stereo_ros.geometry import (epipolar_distance, epipolar_lines,
                                         nearest_point_on_line, nearest_point_on_line_one,
                                         project_onto_lines, triangulate_pixels,
                                         triangulate_rays, triangulate_rays_one)
-from pseudo_stereo_ros.simulation import look_at_calibration
+from pseudo_stereo_ros.sim.scenarios import look_at_calibration
 import pytest
 
 DISTORTIONS = {

@@ -27,11 +27,11 @@ and a p90 at most 80% of naive's.
 from pathlib import Path
 
 import numpy as np
-from pseudo_stereo_ros.bagio import read_observations
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.cli import main
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.evaluation.holdout import estimates_at, holdout
+from pseudo_stereo_ros.formats.bagio import read_observations
 from pseudo_stereo_ros.fusion import Estimate
-from pseudo_stereo_ros.holdout import estimates_at, holdout
 import pytest
 
 LFG = Path(__file__).resolve().parent / 'data' / 'lfg_table_tennis'

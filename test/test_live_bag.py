@@ -27,12 +27,12 @@ from pathlib import Path
 import time
 
 import numpy as np
-from pseudo_stereo_ros.bagio import read_positions
-from pseudo_stereo_ros.cli import main
-from pseudo_stereo_ros.detector_node import DetectorNode
-from pseudo_stereo_ros.fuser_node import FuserNode
-from pseudo_stereo_ros.messages import point_to_xyz
-from pseudo_stereo_ros.replay_node import ReplayNode
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.formats.bagio import read_positions
+from pseudo_stereo_ros.ros.detector_node import DetectorNode
+from pseudo_stereo_ros.ros.fuser_node import FuserNode
+from pseudo_stereo_ros.ros.messages import point_to_xyz
+from pseudo_stereo_ros.ros.replay_node import ReplayNode
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor

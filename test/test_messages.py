@@ -12,18 +12,18 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Tests of pseudo_stereo_ros.messages: the one conversion between messages and core types."""
+"""Tests of pseudo_stereo_ros.ros.messages: the one conversion between messages and core types."""
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from pseudo_stereo_ros.fusion import Estimate, Observation
-from pseudo_stereo_ros.messages import (
+from pseudo_stereo_ros.ros.messages import (
     array_to_image, calibration_to_camera_info, diagnostic_array, diagnostic_status,
     ENCODING_CHANNELS, EncodingError, estimate_to_point, image_point, image_to_array,
     ns_to_stamp, observation_to_point, point_to_observation, point_to_xyz, stamp_to_ns,
     trail_marker)
-from pseudo_stereo_ros.simulation import DEFAULT_EPOCH_NS, default_rig
+from pseudo_stereo_ros.sim.scenarios import DEFAULT_EPOCH_NS, default_rig
 import pytest
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import Marker

@@ -35,10 +35,10 @@ import time
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from pseudo_stereo_ros.fusion import fuse
-from pseudo_stereo_ros.messages import array_to_image, point_to_observation, point_to_xyz
-from pseudo_stereo_ros.rendering import BallRenderer
-from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, default_rig, make_scenario,
-                                          shutter_stamps, truth_at)
+from pseudo_stereo_ros.ros.messages import array_to_image, point_to_observation, point_to_xyz
+from pseudo_stereo_ros.sim.rendering import BallRenderer
+from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario,
+                                             shutter_stamps, truth_at)
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor

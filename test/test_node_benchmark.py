@@ -21,7 +21,8 @@ import sys
 
 def test_quick_benchmark_prints_each_quantity_with_its_baseline_ratio(repo_dir):
     # Its own process: the benchmark sets the Fast DDS profile for large images.
-    result = subprocess.run([sys.executable, '-m', 'pseudo_stereo_ros.node_benchmark', '--quick'],
+    result = subprocess.run([sys.executable, '-m', 'pseudo_stereo_ros.ros.bench_pipeline',
+                             '--quick'],
                             capture_output=True, text=True, timeout=180, cwd=repo_dir)
     assert result.returncode == 0, result.stdout + result.stderr
     rows = {}

@@ -21,19 +21,19 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from pseudo_stereo_ros import bringup
 from pseudo_stereo_ros.calibration import CalibrationError, save_calibration
-from pseudo_stereo_ros.detector_node import DetectorNode
-from pseudo_stereo_ros.fuser_node import FuserNode
 from pseudo_stereo_ros.fusion import fuse
-from pseudo_stereo_ros.messages import (array_to_image, estimate_to_point, image_to_array,
-                                        observation_to_point, point_to_xyz, stamp_to_ns)
-from pseudo_stereo_ros.monitor_node import MonitorNode
-from pseudo_stereo_ros.node_tools import StartupError
-from pseudo_stereo_ros.rendering import BallRenderer
-from pseudo_stereo_ros.simulation import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
-                                          shutter_stamps, truth_at)
-from pseudo_stereo_ros.virtual_camera_node import VirtualCameraNode
+from pseudo_stereo_ros.ros import bringup
+from pseudo_stereo_ros.ros.detector_node import DetectorNode
+from pseudo_stereo_ros.ros.fuser_node import FuserNode
+from pseudo_stereo_ros.ros.messages import (array_to_image, estimate_to_point, image_to_array,
+                                            observation_to_point, point_to_xyz, stamp_to_ns)
+from pseudo_stereo_ros.ros.monitor_node import MonitorNode
+from pseudo_stereo_ros.ros.node_tools import StartupError
+from pseudo_stereo_ros.ros.virtual_camera_node import VirtualCameraNode
+from pseudo_stereo_ros.sim.rendering import BallRenderer
+from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
+                                             shutter_stamps, truth_at)
 import pytest
 import rclpy
 from rclpy.exceptions import InvalidParameterValueException

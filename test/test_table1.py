@@ -14,10 +14,10 @@
 
 """Table 1 on the default rig, and ``track`` on ``simulate`` output giving the same numbers."""
 
-from pseudo_stereo_ros.cli import main
-from pseudo_stereo_ros.csv_io import read_estimates, read_truth
-from pseudo_stereo_ros.experiments import run_table1, score, TABLE1_COLUMNS
-from pseudo_stereo_ros.simulation import default_rig
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.evaluation.table1 import run_table1, score, TABLE1_COLUMNS
+from pseudo_stereo_ros.formats.csv_io import read_estimates, read_truth
+from pseudo_stereo_ros.sim.scenarios import default_rig
 import pytest
 
 

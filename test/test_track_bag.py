@@ -22,19 +22,19 @@ import subprocess
 import sys
 
 import numpy as np
-from pseudo_stereo_ros import messages
-from pseudo_stereo_ros.bagio import (bag_topics, GROUND_TRUTH_TOPIC, image_message, image_topic,
-                                     IMAGE_TYPE, iter_raw, point_message, POSITION_TOPIC,
-                                     read_images, read_positions, typestore, write_messages,
-                                     write_observations)
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.cli import main
-from pseudo_stereo_ros.csv_io import read_estimates, write_observations as write_csv
+from pseudo_stereo_ros.cli.main import main
 from pseudo_stereo_ros.detection import BallDetector
+from pseudo_stereo_ros.formats.bagio import (bag_topics, GROUND_TRUTH_TOPIC, image_message,
+                                             image_topic, IMAGE_TYPE, iter_raw, point_message,
+                                             POSITION_TOPIC, read_images, read_positions,
+                                             typestore, write_messages, write_observations)
+from pseudo_stereo_ros.formats.csv_io import read_estimates, write_observations as write_csv
 from pseudo_stereo_ros.fusion import fuse, Observation
-from pseudo_stereo_ros.rendering import BallRenderer
-from pseudo_stereo_ros.simulation import (default_rig, make_scenario, observe, shutter_stamps,
-                                          truth_at)
+from pseudo_stereo_ros.ros import messages
+from pseudo_stereo_ros.sim.rendering import BallRenderer
+from pseudo_stereo_ros.sim.scenarios import (default_rig, make_scenario, observe, shutter_stamps,
+                                             truth_at)
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from test_bagio import BAD_BAGS, CAMERAS as LFG_CAMERAS, LFG

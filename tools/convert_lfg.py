@@ -49,7 +49,7 @@ from pathlib import Path
 import shutil
 import sys
 
-from pseudo_stereo_ros.bagio import write_observations
+from pseudo_stereo_ros.formats.bagio import write_observations
 from pseudo_stereo_ros.fusion import Observation
 
 SESSIONS = ('n1_n1', 'n3_p1_v14', 'p2_p2')

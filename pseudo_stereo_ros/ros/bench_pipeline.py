@@ -1,0 +1,469 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``bench_pipeline``: how fast the live pipeline is, beside a baseline measured in the same run.
+
+Each measured quantity is printed as median and 90th percentile [ms], with
+its target and, on the row below, a baseline measured in the same run on
+the same inputs; the ratio (median / baseline median) is the number to
+compare between machines and runs:
+
+1. the detector core per 640x480 frame, full frame and with the search
+   window (paper: 2.6 ms image analysis); baseline: ``cv2.cvtColor``
+   BGR->HSV of the full frame, the least a full-frame colour detector does;
+2. the fuser node from receiving an image point to publishing its estimate
+   (in-process, reorder window 0, the default); baseline: the core
+   ``Fuser.update`` alone on the same observations, so the ratio is the
+   node's overhead;
+3. end to end on loopback, image stamp to ``/ball/position``: the
+   ``detector`` (one per camera) and ``fuser`` console scripts run as
+   separate processes; this process publishes rendered images stamped with
+   the wall clock at publication and receives the positions (paper: 4.13 ms
+   from capture to 3D); baseline: image stamp to the same image received by
+   a bare subscriber in another process over the same DDS set-up (the
+   transport), so the difference is the pipeline's own cost.
+
+Absolute numbers depend on the machine and its load; compare the ratios.
+"""
+
+import argparse
+import copy
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+__all__ = ['main', 'transport_probe_main']
+
+PAPER_IMAGE_ANALYSIS_MS = 2.6
+PAPER_CAPTURE_TO_3D_MS = 4.13
+TARGETS_MS = {'window': 1.0, 'full': 3.0, 'fuser': 0.5, 'end_to_end': 5.0}
+#: Run sizes: frames (detector), image points (fuser), seconds of end-to-end streaming.
+FULL_RUN = {'frames': 88, 'points': 300, 'seconds': 5.0}
+QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0}
+FPS = 30.0
+
+_LABEL_WIDTH = 46
+
+
+def _stats(seconds) -> Tuple[float, float]:
+    """Return (median, p90) [ms] of durations [s] (NaN when there are none)."""
+    ms = np.asarray(seconds, dtype=float) * 1e3
+    if not ms.size:
+        return float('nan'), float('nan')
+    return float(np.median(ms)), float(np.percentile(ms, 90))
+
+
+def _header() -> str:
+    return (f'  {"quantity":<{_LABEL_WIDTH}s}{"n":>6s}{"median":>9s}{"p90":>9s}  '
+            f'{"target":<13s}{"ratio":>7s}')
+
+
+def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = None,
+         baseline: Optional[Sequence[float]] = None, extra: str = '') -> str:
+    """
+    Return one table row: n, median and p90 [ms], the target verdict and the baseline ratio.
+
+    :param label: what was measured
+    :param seconds: the measured durations [s]
+    :param target_ms: the target for the median [ms]; None for a baseline row
+    :param baseline: durations [s] of the baseline; the ratio is median / baseline median
+    :param extra: text after the ratio
+    :return: the row
+    """
+    median, p90 = _stats(seconds)
+    target = ''
+    if target_ms is not None:
+        target = f'<= {target_ms:g} ' + ('ok' if median <= target_ms else 'OVER')
+    ratio = ''
+    if baseline is not None:
+        base = _stats(baseline)[0]
+        ratio = f'{median / base:.2f}x' if base > 0 else 'n/a'
+    return (f'  {label:<{_LABEL_WIDTH}s}{len(seconds):>6d}{median:>9.3f}{p90:>9.3f}  '
+            f'{target:<13s}{ratio:>7s}{extra}').rstrip()
+
+
+def _frame_points(count: int) -> np.ndarray:
+    """Return (count, 3) true positions [m] at camera 1's shutters, the spiral repeated."""
+    from ..sim.scenarios import make_scenario, shutter_stamps, truth_at
+    scenario = make_scenario('spiral')
+    points = truth_at(scenario, shutter_stamps(FPS, scenario.duration_s))
+    return np.resize(points, (count, 3))
+
+
+def _renderers():
+    from ..sim.rendering import BallRenderer
+    from ..sim.scenarios import default_rig
+    cameras = default_rig()
+    return cameras, [BallRenderer(camera, noise_std=2.0, seed=i)
+                     for i, camera in enumerate(cameras)]
+
+
+def bench_detector(count: int) -> dict:
+    """
+    Time the detector core and its baseline on the same rendered frames.
+
+    Each frame is timed with all three in turn, so a change of load on the
+    machine affects them alike.
+
+    :param count: frames (640x480 bgr8)
+    :return: per-frame durations [s]: ``full``, ``window`` (48 px) and ``baseline``
+        (``cv2.cvtColor`` BGR->HSV of the full frame)
+    """
+    import cv2
+    from ..detection import BallDetector
+    _, renderers = _renderers()
+    images = [renderers[0].render(p) for p in _frame_points(count)]
+    detectors = {'full': BallDetector(search_window_px=0),
+                 'window': BallDetector(search_window_px=48)}
+    result = {'baseline': [], 'full': [], 'window': []}
+    cv2.cvtColor(images[0], cv2.COLOR_BGR2HSV)  # warm caches
+    for detector in detectors.values():
+        detector.detect(images[0], 'bgr8')
+    for image in images:
+        start = time.perf_counter()
+        cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+        result['baseline'].append(time.perf_counter() - start)
+        for key, detector in detectors.items():
+            start = time.perf_counter()
+            detector.detect(image, 'bgr8')
+            result[key].append(time.perf_counter() - start)
+    return result
+
+
+def _observations(count: int) -> list:
+    """Return ``count`` observations of the default rig: spiral laps, one after another."""
+    from ..sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
+                                 shutter_stamps)
+    cameras = default_rig()
+    scenario = make_scenario('spiral')
+    period_ns = round(1e9 / FPS)
+    lap_ns = (int(scenario.duration_s * 1e9) // period_ns + 1) * period_ns
+    observations = []
+    lap = 0
+    while len(observations) < count:
+        epoch_ns = DEFAULT_EPOCH_NS + lap * lap_ns
+        stamps = [shutter_stamps(FPS, scenario.duration_s, phase_s=i / (2 * FPS),
+                                 epoch_ns=epoch_ns) for i in range(len(cameras))]
+        observations.extend(observe(scenario, cameras, stamps, epoch_ns=epoch_ns, seed=lap))
+        lap += 1
+    return observations[:count]
+
+
+def bench_fuser_node(count: int) -> dict:
+    """
+    Time the fuser node, point received -> published, and the core fuser on the same points.
+
+    :param count: image points
+    :return: durations [s]: ``node`` (the node's own receive-to-publish times) and
+        ``baseline`` (``Fuser.update`` of a copy of the node's core fuser, same observations)
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.logging import LoggingSeverity
+    from rclpy.parameter import Parameter
+    from geometry_msgs.msg import PointStamped
+    from .fuser_node import FuserNode
+    from .messages import observation_to_point
+
+    observations = _observations(count)
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    namespace = f'bench_fuser_{os.getpid()}'
+    rclpy.logging.set_logger_level(f'{namespace}.fuser', LoggingSeverity.WARN)
+    baseline = []
+    try:
+        fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
+            Parameter('reorder_window_s', value=0.0),
+            Parameter('diagnostics_period_s', value=0.0)])
+        core = copy.deepcopy(fuser.fuser)  # same cameras and options, no state yet
+        source = rclpy.create_node('bench_source', context=context, namespace=namespace)
+        publishers = {name: source.create_publisher(PointStamped, f'{name}/ball/image_point',
+                                                    100)
+                      for name in sorted({o.camera for o in observations})}
+        received = []
+        sink = source.create_subscription(PointStamped, 'ball/position', received.append, 100)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(fuser)
+        executor.add_node(source)
+        for count_so_far, observation in enumerate(observations, 1):
+            start = time.perf_counter()
+            core.update(observation)
+            baseline.append(time.perf_counter() - start)
+            publishers[observation.camera].publish(observation_to_point(observation))
+            deadline = time.monotonic() + 1.0
+            while (fuser.fuser.stats['observations'] < count_so_far
+                   and time.monotonic() < deadline):
+                executor.spin_once(timeout_sec=0.01)
+        executor.spin_once(timeout_sec=0.05)
+        del sink
+        times = list(fuser.processing_times_s)
+        executor.shutdown()
+        fuser.destroy_node()
+        source.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return {'node': times, 'baseline': baseline}
+
+
+def _script(name: str) -> str:
+    candidate = Path(sys.executable).parent / name
+    if candidate.exists():
+        return str(candidate)
+    found = shutil.which(name)
+    if found is None:
+        raise FileNotFoundError(f'console script {name!r} not found beside {sys.executable} '
+                                'or on PATH')
+    return found
+
+
+def transport_probe_main(argv: Optional[List[str]] = None) -> int:
+    """
+    Run the bare image subscriber of the transport baseline until SIGINT.
+
+    Subscribes ``<namespace>/<camera>/image_raw`` as the detector does
+    (``qos_profile_sensor_data``) and does nothing with the images but note
+    the wall-clock time of arrival.  On SIGINT it prints one line per image,
+    ``<stamp ns> <received ns>``, on stdout.
+
+    :param argv: the namespace, then the camera names; None for ``sys.argv[1:]``
+    :return: exit status
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    namespace, *names = sys.argv[1:] if argv is None else argv
+    arrivals = []
+
+    def on_image(msg):
+        arrivals.append((msg.header.stamp.sec, msg.header.stamp.nanosec, time.time_ns()))
+
+    rclpy.init(args=[])
+    node = None
+    try:
+        node = rclpy.create_node('bench_transport_probe', namespace=namespace)
+        for name in names:
+            node.create_subscription(Image, f'{name}/image_raw', on_image,
+                                     qos_profile_sensor_data)
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    sys.stdout.write(''.join(f'{sec * 1_000_000_000 + nanosec} {received}\n'
+                             for sec, nanosec, received in arrivals))
+    return 0
+
+
+def _start_transport_probe(namespace: str, names: Sequence[str]) -> subprocess.Popen:
+    code = ('import sys\n'
+            'from pseudo_stereo_ros.ros.bench_pipeline import transport_probe_main\n'
+            'sys.exit(transport_probe_main())\n')
+    return subprocess.Popen([sys.executable, '-c', code, namespace, *names],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+
+
+def _stop_transport_probe(process: subprocess.Popen) -> List[Tuple[int, int]]:
+    """Stop the probe; return its (stamp ns, received ns) pairs (empty when it failed)."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    try:
+        output, _ = process.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
+        return []
+    pairs = []
+    for line in output.splitlines():
+        try:
+            stamp, received = (int(x) for x in line.split())
+        except ValueError:
+            continue
+        pairs.append((stamp, received))
+    return pairs
+
+
+def _latencies(pairs, since_ns: Optional[int]) -> List[float]:
+    """Return received - stamp [s] of the (stamp, received) [ns] pairs stamped at or after."""
+    if since_ns is None:
+        return []
+    return [(received - stamp) / 1e9 for stamp, received in pairs if stamp >= since_ns]
+
+
+def bench_end_to_end(seconds: float) -> dict:
+    """
+    Time image stamp -> /ball/position with separate node processes, and the transport.
+
+    :param seconds: streaming time after a warm-up of 20 images [s]
+    :return: latencies [s]: ``pipeline`` (image stamp -> /ball/position received here) and
+        ``transport`` (image stamp -> the same images received by a bare subscriber in
+        another process); both only for images published after the warm-up
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from geometry_msgs.msg import PointStamped
+    from sensor_msgs.msg import Image
+    from .messages import array_to_image, ns_to_stamp, stamp_to_ns
+
+    cameras, renderers = _renderers()
+    points = _frame_points(200)
+    names = [c.name for c in cameras]
+    namespace = f'bench_e2e_{os.getpid()}'
+    positions = []
+    since_ns = None
+    with tempfile.TemporaryDirectory() as tmp:
+        params = Path(tmp) / 'params.yaml'
+        params.write_text('/**/fuser:\n  ros__parameters:\n    reorder_window_s: 0.0\n')
+        processes = [subprocess.Popen(
+            [_script('detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
+             '--log-level', 'warn'], stdin=subprocess.DEVNULL) for name in names]
+        processes.append(subprocess.Popen(
+            [_script('fuser'), '--ros-args', '-r', f'__ns:=/{namespace}', '--params-file',
+             str(params), '--log-level', 'warn'], stdin=subprocess.DEVNULL))
+        probe = _start_transport_probe(f'/{namespace}', names)
+        transport_pairs = []
+        context = rclpy.Context()
+        rclpy.init(args=[], context=context)
+        try:
+            node = rclpy.create_node('bench_e2e', namespace=namespace, context=context)
+            publishers = [node.create_publisher(Image, f'{name}/image_raw',
+                                                qos_profile_sensor_data) for name in names]
+
+            def on_position(msg):
+                positions.append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+
+            node.create_subscription(PointStamped, 'ball/position', on_position, 100)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            deadline = time.monotonic() + 30.0
+            # Each image topic has two subscribers: the detector and the transport probe.
+            while time.monotonic() < deadline and not (
+                    all(p.get_subscription_count() >= 2 for p in publishers)
+                    and node.count_publishers(f'/{namespace}/ball/position')):
+                executor.spin_once(timeout_sec=0.05)
+            time.sleep(0.5)  # let the reliable point topics match too
+            period = 1.0 / (FPS * len(cameras))
+            start = time.monotonic()
+            index = 0
+            warm_up = 20
+            while time.monotonic() - start < seconds + warm_up * period:
+                camera = index % len(cameras)
+                image = renderers[camera].render(points[index // len(cameras) % len(points)])
+                msg = array_to_image(image, 'bgr8', 0, names[camera])
+                next_time = start + index * period
+                while time.monotonic() < next_time:
+                    executor.spin_once(timeout_sec=max(next_time - time.monotonic(), 0))
+                stamp_ns = time.time_ns()
+                if index == warm_up:
+                    since_ns = stamp_ns
+                msg.header.stamp = ns_to_stamp(stamp_ns)
+                publishers[camera].publish(msg)
+                index += 1
+            end = time.monotonic() + 0.3
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            executor.shutdown()
+            node.destroy_node()
+        finally:
+            rclpy.try_shutdown(context=context)
+            transport_pairs = _stop_transport_probe(probe)
+            for process in processes:
+                process.terminate()
+            for process in processes:
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+    return {'pipeline': _latencies(positions, since_ns),
+            'transport': _latencies(transport_pairs, since_ns)}
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run the benchmarks and print the table; return the exit status."""
+    parser = argparse.ArgumentParser(prog='bench_pipeline', description=__doc__.split('\n')[1])
+    parser.add_argument('--frames', type=int, default=None,
+                        help=f'frames for the detector (default {FULL_RUN["frames"]})')
+    parser.add_argument('--points', type=int, default=None,
+                        help=f'image points for the fuser (default {FULL_RUN["points"]})')
+    parser.add_argument('--seconds', type=float, default=None,
+                        help=f'end-to-end run time [s] (default {FULL_RUN["seconds"]:g})')
+    parser.add_argument('--quick', action='store_true',
+                        help='a short run that only checks the benchmark works: ' +
+                        ', '.join(f'{k} {v:g}' for k, v in QUICK_RUN.items()))
+    parser.add_argument('--skip-end-to-end', action='store_true',
+                        help='no separate processes (no DDS discovery needed)')
+    options = parser.parse_args(argv)
+    sizes = QUICK_RUN if options.quick else FULL_RUN
+    for key, value in sizes.items():
+        if getattr(options, key) is None:
+            setattr(options, key, value)
+        if not getattr(options, key) > 0:
+            parser.error(f'--{key} must be positive')
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    # Before any DDS participant exists: 900 kB frames need a larger shared-memory segment.
+    from ..sim.scenarios import config_dir
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
+                          str(config_dir() / 'fastdds_large_images.xml'))
+    print('bench_pipeline: 640x480 frames, default rig, spiral; times in ms per frame or event;')
+    print('ratio = median / median of the baseline row below it (same inputs, same run)')
+    print(_header())
+    detector = bench_detector(options.frames)
+    print(_row('detector, full frame', detector['full'], target_ms=TARGETS_MS['full'],
+               baseline=detector['baseline']))
+    print(_row('detector, search window 48 px', detector['window'],
+               target_ms=TARGETS_MS['window'], baseline=detector['baseline']))
+    print(_row('  baseline: cv2.cvtColor BGR->HSV, full frame', detector['baseline']))
+    sys.stdout.flush()
+    fuser = bench_fuser_node(options.points)
+    print(_row('fuser node, point received -> published', fuser['node'],
+               target_ms=TARGETS_MS['fuser'], baseline=fuser['baseline']))
+    print(_row('  baseline: core Fuser.update, same points', fuser['baseline']))
+    sys.stdout.flush()
+    status = 0
+    if not options.skip_end_to_end:
+        latencies = bench_end_to_end(options.seconds)
+        pipeline, transport = latencies['pipeline'], latencies['transport']
+        extra = ''
+        if pipeline and transport:
+            extra = f'  (+{_stats(pipeline)[0] - _stats(transport)[0]:.3f} ms)'
+        print(_row('end to end, image stamp -> /ball/position', pipeline,
+                   target_ms=TARGETS_MS['end_to_end'],
+                   baseline=transport if transport else None, extra=extra))
+        print(_row('  baseline: image stamp -> bare subscriber', transport))
+        if not pipeline:
+            print('  end to end: no /ball/position received (DDS discovery failed?)')
+            status = 1
+        if not transport:
+            print('  transport baseline: no image received by the probe process')
+            status = 1
+    print(f'paper (other hardware): image analysis {PAPER_IMAGE_ANALYSIS_MS} ms, '
+          f'capture to 3D {PAPER_CAPTURE_TO_3D_MS} ms; (+x ms): median minus baseline median')
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())

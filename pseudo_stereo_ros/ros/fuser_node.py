@@ -1,0 +1,251 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The ``fuser`` node: image points of several cameras in, ``/ball/position`` out at every event.
+
+Thin glue around the core :class:`pseudo_stereo_ros.fusion.Fuser` (the same
+code path as ``pseudo_stereo track``): each ``/<name>/ball/image_point``
+becomes an :class:`~pseudo_stereo_ros.fusion.Observation`, a
+:class:`~pseudo_stereo_ros.reorder.ReorderBuffer` puts the topics back into
+stamp order (holding a point at most ``reorder_window_s``), and every
+estimate is published stamped with the shutter stamp of its event.
+
+A point older than the newest fused one by more than ``max_gap_s`` (a
+replayed bag looping, a restarted clock) starts a new session: the reorder
+buffer and the timing statistics start afresh, as the core fuser does.
+"""
+
+from collections import Counter, deque
+import functools
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from visualization_msgs.msg import Marker
+
+from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
+                       point_to_observation, trail_marker)
+from .node_tools import declare, load_cameras, run_node, StartupError
+from ..fusion import DROP_REASONS, Fuser, METHODS, Observation
+from ..reorder import ReorderBuffer
+
+__all__ = ['FuserNode', 'main']
+
+
+def _seconds_to_ns(name: str, value: float) -> int:
+    if not value >= 0:
+        raise StartupError(f'parameter {name!r}: must be >= 0 s, got {value}')
+    return int(round(value * 1e9))
+
+
+class FuserNode(Node):
+    """
+    Fuse stamped image points of unsynchronized cameras into 3D positions.
+
+    :param kwargs: passed to :class:`rclpy.node.Node` (``namespace``, ``parameter_overrides``,
+        ``context``, ...)
+    """
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault('node_name', 'fuser')
+        super().__init__(**kwargs)
+        names = declare(self, 'camera_names', ['camera1', 'camera2'],
+                        'camera names; subscribes /<name>/ball/image_point', read_only=True)
+        files = declare(self, 'calibration_files', [''],
+                        'calibration YAML per camera, same order; [""]: config/rig/<name>.yaml',
+                        read_only=True)
+        method = declare(self, 'method', 'paper', 'fusion method', choices=METHODS,
+                         read_only=True)
+        self.world_frame = declare(self, 'world_frame', 'world',
+                                   'frame_id of /ball/position and the marker')
+        sync_s = declare(self, 'sync_tolerance_s', 0.001,
+                         'observations of two cameras closer than this are simultaneous [s]',
+                         min_value=0.0, read_only=True)
+        gap_s = declare(self, 'max_gap_s', 0.1,
+                        'longest interval bridged; older data is not used (stale camera) [s]',
+                        min_value=0.0, read_only=True)
+        # 0 by default: every point is fused the moment it arrives (lowest latency); a point
+        # older than one already fused is dropped and counted. Raise it when the detectors'
+        # latencies differ by more than the cameras' phase.
+        window_s = declare(self, 'reorder_window_s', 0.0,
+                           'longest hold of a point to restore stamp order across topics [s]',
+                           min_value=0.0, max_value=1.0, read_only=True)
+        trail_length = declare(self, 'trail_length', 120,
+                               'points in the /ball/marker trail', min_value=2)
+        marker_period_s = declare(self, 'marker_period_s', 0.1,
+                                  'period of /ball/marker [s]; 0 disables', min_value=0.0)
+        diagnostics_period_s = declare(self, 'diagnostics_period_s', 1.0,
+                                       'period of /diagnostics [s]; 0 disables',
+                                       min_value=0.0)
+        if not self.world_frame:
+            raise StartupError('parameter world_frame: must not be empty (the frame_id of '
+                               '/ball/position, e.g. world)')
+        if files == [''] or files == []:
+            files = []
+        #: True when the calibrations are the simulated rig's (calibration_files not given).
+        self.default_calibration = not files
+        self.cameras = load_cameras(names, files)
+        try:
+            self.fuser = Fuser(self.cameras, method=method,
+                               sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
+                               max_gap_ns=_seconds_to_ns('max_gap_s', gap_s))
+        except ValueError as err:
+            if isinstance(err, StartupError):
+                raise
+            raise StartupError(f'parameters sync_tolerance_s / max_gap_s: {err}') from err
+        self._names = list(names)
+        self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
+        self._max_gap_ns = self.fuser.max_gap_ns
+        self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
+        #: Counts: ``late`` (points older than one already fused, over all sessions),
+        #: ``sessions`` (new sessions after time jumped back).
+        self.node_stats = Counter()
+        #: Seconds from a point's arrival to its estimate's publication (no hold), recent ones.
+        self.processing_times_s = deque(maxlen=10_000)
+        self._inputs = Counter()
+        self._inputs_reported = Counter()
+        self._last_stamp = {}
+        self._deltas = {}  # 'camera1->camera2' -> (count, sum ns, last ns)
+        self._delta_keys = {(a, b): f'{a}->{b}' for a in names for b in names if a != b}
+        self._newest_fused_ns = None
+        self._trail = deque(maxlen=trail_length)
+        self._newest_ns = None
+        self._reported_at = time.monotonic()
+
+        self._position_pub = self.create_publisher(PointStamped, 'ball/position', 10)
+        self._marker_pub = self.create_publisher(Marker, 'ball/marker', 10)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._subscriptions = [
+            self.create_subscription(PointStamped, f'{name}/ball/image_point',
+                                     functools.partial(self._on_point, name), 100)
+            for name in names]
+        self._flush_timer = None
+        if self.buffer.window_ns > 0:
+            self._flush_timer = self.create_timer(window_s, self._on_flush_timer)
+            self._flush_timer.cancel()
+        if marker_period_s > 0:
+            self.create_timer(marker_period_s, self._publish_marker)
+        if diagnostics_period_s > 0:
+            self.create_timer(diagnostics_period_s, self._publish_diagnostics)
+        self.get_logger().info(
+            f'fusing {", ".join(names)} with method {method!r} -> '
+            f'{self._position_pub.topic_name}')
+
+    # -- callbacks ------------------------------------------------------------------------------
+
+    def _on_point(self, name: str, msg: PointStamped) -> None:
+        start = time.perf_counter()
+        self._inputs[name] += 1
+        observation = point_to_observation(msg, name)
+        newest = self._newest_fused_ns
+        if newest is not None and newest - observation.stamp_ns > self._max_gap_ns:
+            self._new_session()
+        late_before = self.buffer.stats['late']
+        released = self.buffer.push(observation.stamp_ns, name, observation,
+                                    time.monotonic_ns())
+        self.node_stats['late'] += self.buffer.stats['late'] - late_before
+        for item in released:
+            self._process(item)
+        if released and released[-1] is observation:
+            self.processing_times_s.append(time.perf_counter() - start)
+        if len(self.buffer) and self._flush_timer is not None and self._flush_timer.is_canceled():
+            self._flush_timer.reset()
+
+    def _on_flush_timer(self) -> None:
+        for item in self.buffer.pop_due(time.monotonic_ns()):
+            self._process(item)
+        if not len(self.buffer):
+            self._flush_timer.cancel()
+
+    def _new_session(self) -> None:
+        """Time jumped back beyond max_gap: fuse what is held, then start over."""
+        for item in self.buffer.flush():
+            self._process(item)
+        self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
+        self._last_stamp.clear()
+        self._newest_fused_ns = None
+        self.node_stats['sessions'] += 1
+
+    def _process(self, observation: Observation) -> None:
+        name, stamp = observation.camera, observation.stamp_ns
+        if self._newest_fused_ns is None or stamp > self._newest_fused_ns:
+            self._newest_fused_ns = stamp
+        for other, other_stamp in self._last_stamp.items():
+            if other != name and other_stamp < stamp:
+                key = self._delta_keys[other, name]
+                count, total, _ = self._deltas.get(key, (0, 0, 0))
+                self._deltas[key] = (count + 1, total + stamp - other_stamp, stamp - other_stamp)
+        if stamp > self._last_stamp.get(name, -1):
+            self._last_stamp[name] = stamp
+        estimate = self.fuser.update(observation)
+        if estimate is None:
+            return
+        self._position_pub.publish(estimate_to_point(estimate, self.world_frame))
+        self._trail.append((estimate.x, estimate.y, estimate.z))
+        self._newest_ns = estimate.stamp_ns
+
+    def _publish_marker(self) -> None:
+        if self._newest_ns is not None and len(self._trail) >= 2:
+            self._marker_pub.publish(trail_marker(self._trail, self._newest_ns,
+                                                  self.world_frame))
+
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        elapsed = max(now - self._reported_at, 1e-9)
+        self._reported_at = now
+        stats = self.fuser.stats
+        values = {}
+        for name in self.fuser.camera_names:
+            values[f'{name} input rate [Hz]'] = (self._inputs[name]
+                                                 - self._inputs_reported[name]) / elapsed
+        estimates = stats['estimates']
+        values['output rate [Hz]'] = (estimates - self._inputs_reported['_estimates']) / elapsed
+        self._inputs_reported = Counter(self._inputs)
+        self._inputs_reported['_estimates'] = estimates
+        for key, (count, total, last) in sorted(self._deltas.items()):
+            values[f'delta {key} mean [ms]'] = total / count / 1e6
+            values[f'delta {key} last [ms]'] = last / 1e6
+        values['observations'] = stats['observations']
+        values['estimates'] = estimates
+        # Every observation gives an estimate or exactly one drop reason; 'late' and 'resets'
+        # are not drops (a late point is still estimated when the method can).
+        for key in DROP_REASONS:
+            if stats[key]:
+                values[f'dropped: {key}'] = stats[key]
+        values['resets'] = stats['resets']
+        values['late (older than a fused point, after the reorder window)'] = \
+            self.node_stats['late']
+        values['new sessions (time jumped back)'] = self.node_stats['sessions']
+        inputs = sum(self._inputs.values())
+        if inputs and not estimates:
+            level, message = 'warn', 'receiving image points but no estimates yet'
+        elif values['output rate [Hz]'] == 0 and inputs:
+            level, message = 'warn', 'no estimates in the last period (a camera stale?)'
+        else:
+            level, message = 'ok', f'{estimates} estimates'
+        status = diagnostic_status(f'{self.get_name()}: pseudo stereo fuser', level, message,
+                                   values)
+        self._diagnostics_pub.publish(
+            diagnostic_array(self.get_clock().now().nanoseconds, [status]))
+
+
+def main(args=None) -> int:
+    """Run the fuser node (``ros2 run pseudo_stereo_ros fuser``)."""
+    return run_node(FuserNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

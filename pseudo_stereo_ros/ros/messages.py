@@ -1,0 +1,261 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The one module converting between ROS messages and the core's types.
+
+Stamps are integer nanoseconds everywhere in the core; here they become
+``builtin_interfaces/Time`` (``sec``, ``nanosec``) and back, never through
+float seconds (a stamp near 1.7e18 ns loses ~200 ns as a float).
+
+Images: ``sensor_msgs/Image`` <-> numpy ``(H, W)`` (mono8) or ``(H, W, C)``
+arrays in the encoding's channel order (rgb8, bgr8: C = 3; rgba8, bgra8:
+C = 4).  Rows may be padded (``step > width * C``); the padding is dropped.
+"""
+
+import array
+from typing import Iterable, Mapping, Optional, Sequence, Tuple
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PointStamped
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker
+
+from ..calibration import CameraCalibration
+from ..detection import ENCODING_CHANNELS, EncodingError, image_array
+from ..fusion import Estimate, Observation
+# The ns <-> (sec, nanosec) arithmetic, shared with bagio.
+from ..stamps import stamp_fields, stamp_ns
+
+__all__ = [
+    'ENCODING_CHANNELS',
+    'EncodingError',
+    'array_to_image',
+    'calibration_to_camera_info',
+    'diagnostic_array',
+    'diagnostic_status',
+    'estimate_to_point',
+    'header',
+    'image_point',
+    'image_to_array',
+    'ns_to_stamp',
+    'observation_to_point',
+    'point_to_observation',
+    'point_to_xyz',
+    'stamp_to_ns',
+    'trail_marker',
+]
+
+_NS_PER_S = 1_000_000_000
+
+#: Diagnostic level names -> DiagnosticStatus level bytes.
+_LEVELS = {
+    'ok': DiagnosticStatus.OK,
+    'warn': DiagnosticStatus.WARN,
+    'error': DiagnosticStatus.ERROR,
+    'stale': DiagnosticStatus.STALE,
+}
+
+
+# -- time -----------------------------------------------------------------------------------------
+
+def stamp_to_ns(stamp: Time) -> int:
+    """Return a ``builtin_interfaces/Time`` as integer nanoseconds."""
+    return stamp_ns(stamp)
+
+
+def ns_to_stamp(stamp_ns: int) -> Time:
+    """
+    Return integer nanoseconds as a ``builtin_interfaces/Time``.
+
+    :param stamp_ns: a non-negative stamp [ns]
+    :return: the message (``sec``, ``nanosec`` with ``0 <= nanosec < 1e9``)
+    """
+    return Time(**stamp_fields(stamp_ns))
+
+
+def header(stamp_ns: int, frame_id: str = '') -> Header:
+    """Return a ``std_msgs/Header`` with the stamp [ns] and frame."""
+    return Header(stamp=ns_to_stamp(stamp_ns), frame_id=frame_id)
+
+
+# -- points ---------------------------------------------------------------------------------------
+
+def point_to_observation(msg: PointStamped, camera: str) -> Observation:
+    """
+    Return the detection in a ``ball/image_point`` message as an observation.
+
+    :param msg: ``point.x = u``, ``point.y = v`` in raw pixels, stamp = shutter time
+    :param camera: the name of the camera that published it
+    :return: the observation (``u``, ``v`` may be non-finite; the fuser drops them)
+    """
+    return Observation(camera, stamp_to_ns(msg.header.stamp), float(msg.point.x),
+                       float(msg.point.y))
+
+
+def observation_to_point(observation: Observation, frame_id: str = '') -> PointStamped:
+    """Return an observation as a ``ball/image_point`` message (``z = 0``)."""
+    return PointStamped(header=header(observation.stamp_ns, frame_id),
+                        point=Point(x=float(observation.u), y=float(observation.v), z=0.0))
+
+
+def image_point(image_header: Header, u: float, v: float) -> PointStamped:
+    """
+    Return a detection as a ``ball/image_point`` message.
+
+    :param image_header: the image's header (shutter stamp and camera frame), kept unchanged
+    :param u: column [raw px]
+    :param v: row [raw px]
+    :return: the message (``z = 0``)
+    """
+    return PointStamped(header=image_header, point=Point(x=float(u), y=float(v), z=0.0))
+
+
+def estimate_to_point(estimate: Estimate, frame_id: str) -> PointStamped:
+    """
+    Return an estimate as a ``/ball/position`` message.
+
+    :param estimate: the estimate; its stamp is the shutter stamp of the event
+    :param frame_id: the world frame
+    :return: the message, position in metres
+    """
+    return PointStamped(header=header(estimate.stamp_ns, frame_id),
+                        point=Point(x=float(estimate.x), y=float(estimate.y),
+                                    z=float(estimate.z)))
+
+
+def point_to_xyz(msg: PointStamped) -> Tuple[int, float, float, float]:
+    """Return ``(stamp_ns, x, y, z)`` of a ``PointStamped``."""
+    return (stamp_to_ns(msg.header.stamp), float(msg.point.x), float(msg.point.y),
+            float(msg.point.z))
+
+
+# -- images ---------------------------------------------------------------------------------------
+
+def image_to_array(msg: Image) -> np.ndarray:
+    """
+    Return the pixels of an image message as a numpy array (a view where possible).
+
+    :param msg: an 8-bit image in one of :data:`ENCODING_CHANNELS`
+    :return: (H, W) uint8 for mono8, (H, W, C) uint8 in the encoding's channel order
+    :raises EncodingError: unsupported encoding, or ``step``/``data`` inconsistent with the size
+    """
+    return image_array(msg.data, msg.height, msg.width, msg.step, msg.encoding)
+
+
+def array_to_image(pixels: np.ndarray, encoding: str, stamp_ns: int,
+                   frame_id: str = '') -> Image:
+    """
+    Return a numpy image as a ``sensor_msgs/Image`` (rows unpadded).
+
+    :param pixels: (H, W) or (H, W, C) uint8 in the encoding's channel order
+    :param encoding: one of :data:`ENCODING_CHANNELS`
+    :param stamp_ns: the shutter stamp [ns]
+    :param frame_id: the camera's optical frame
+    :return: the message
+    :raises EncodingError: unknown encoding or a shape that does not match it
+    """
+    channels = ENCODING_CHANNELS.get(encoding)
+    if channels is None:
+        raise EncodingError(f'unsupported image encoding {encoding!r}')
+    pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    if pixels.ndim != 3 or pixels.shape[2] != channels:
+        raise EncodingError(f'array of shape {pixels.shape} does not fit encoding {encoding!r}')
+    height, width = pixels.shape[:2]
+    msg = Image(header=header(stamp_ns, frame_id), height=height, width=width,
+                encoding=encoding, is_bigendian=0, step=width * channels)
+    # array.array from bytes is a memcpy; a plain sequence would be checked element by element.
+    msg.data = array.array('B', pixels.tobytes())
+    return msg
+
+
+def calibration_to_camera_info(calibration: CameraCalibration, stamp_ns: int,
+                               frame_id: str = '') -> CameraInfo:
+    """
+    Return a calibration's intrinsics as a ``sensor_msgs/CameraInfo``.
+
+    :param calibration: the camera's calibration (the pose is not part of CameraInfo)
+    :param stamp_ns: the shutter stamp [ns]
+    :param frame_id: the camera's optical frame
+    :return: the message (``r`` identity, ``p = [K | 0]``)
+    """
+    k = np.asarray(calibration.camera_matrix, dtype=float)
+    projection = np.zeros((3, 4))
+    projection[:, :3] = k
+    model = calibration.distortion_model
+    return CameraInfo(header=header(stamp_ns, frame_id), height=calibration.image_height,
+                      width=calibration.image_width,
+                      distortion_model='plumb_bob' if model == 'radtan' else model,
+                      d=[float(x) for x in calibration.dist_coeffs],
+                      k=[float(x) for x in k.ravel()],
+                      r=[float(x) for x in np.eye(3).ravel()],
+                      p=[float(x) for x in projection.ravel()])
+
+
+# -- visualization and diagnostics ----------------------------------------------------------------
+
+def trail_marker(points: Iterable[Sequence[float]], stamp_ns: int, frame_id: str, *,
+                 namespace: str = 'ball_trail', marker_id: int = 0, width_m: float = 0.01,
+                 rgba: Sequence[float] = (1.0, 0.5, 0.0, 1.0)) -> Marker:
+    """
+    Return an RViz LINE_STRIP marker through the given points.
+
+    :param points: (N, 3) world points [m], oldest first
+    :param stamp_ns: the stamp of the newest point [ns]
+    :param frame_id: the world frame
+    :param namespace: the marker namespace
+    :param marker_id: the marker id (the same id replaces the previous trail)
+    :param width_m: line width [m]
+    :param rgba: colour, components in [0, 1]
+    :return: the marker
+    """
+    marker = Marker(header=header(stamp_ns, frame_id), ns=namespace, id=int(marker_id),
+                    type=Marker.LINE_STRIP, action=Marker.ADD)
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = float(width_m)
+    marker.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
+                             a=float(rgba[3]))
+    marker.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points]
+    return marker
+
+
+def diagnostic_status(name: str, level: str, message: str,
+                      values: Optional[Mapping[str, object]] = None, *,
+                      hardware_id: str = '') -> DiagnosticStatus:
+    """
+    Return one ``diagnostic_msgs/DiagnosticStatus``.
+
+    :param name: the status name, e.g. ``'fuser: camera1'``
+    :param level: ``'ok'``, ``'warn'``, ``'error'`` or ``'stale'``
+    :param message: a one-line summary
+    :param values: key -> value (written with ``str``; floats with 6 significant digits)
+    :param hardware_id: optional hardware id
+    :return: the status
+    """
+    items = []
+    for key, value in (values or {}).items():
+        text = f'{value:.6g}' if isinstance(value, float) else str(value)
+        items.append(KeyValue(key=str(key), value=text))
+    return DiagnosticStatus(level=_LEVELS[level], name=name, message=message,
+                            hardware_id=hardware_id, values=items)
+
+
+def diagnostic_array(stamp_ns: int, statuses: Sequence[DiagnosticStatus]) -> DiagnosticArray:
+    """Return a ``diagnostic_msgs/DiagnosticArray`` of the statuses, stamped [ns]."""
+    return DiagnosticArray(header=header(stamp_ns), status=list(statuses))
