@@ -22,7 +22,9 @@ imports neither rclpy nor any message package: :mod:`.calibration`,
 
 from .calibration import CalibrationError, CameraCalibration, load_calibration, save_calibration
 from .camera import Camera
-from .fusion import Estimate, fuse, Fuser, METHODS, Observation
+from .errors import PseudoStereoError
+from .fusion import fuse, Fuser, METHODS
+from .records import Estimate, GroundTruth, Observation
 
 __all__ = [
     'CalibrationError',
@@ -30,8 +32,10 @@ __all__ = [
     'CameraCalibration',
     'Estimate',
     'Fuser',
+    'GroundTruth',
     'METHODS',
     'Observation',
+    'PseudoStereoError',
     'fuse',
     'load_calibration',
     'save_calibration',

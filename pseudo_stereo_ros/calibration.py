@@ -32,6 +32,8 @@ from typing import Any, Mapping, Union
 import numpy as np
 import yaml
 
+from .errors import CalibrationError
+
 __all__ = [
     'CalibrationError',
     'CameraCalibration',
@@ -57,10 +59,6 @@ DISTORTION_MODELS = {
 ROTATION_TOLERANCE = 1e-5
 
 PathLike = Union[str, os.PathLike]
-
-
-class CalibrationError(ValueError):
-    """A calibration file or dictionary is malformed; the message names file, key and reason."""
 
 
 @dataclass(frozen=True, eq=False)

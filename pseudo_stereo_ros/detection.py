@@ -40,6 +40,8 @@ from typing import Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
+from .errors import DetectorConfigError, EncodingError
+
 __all__ = ['BallDetector', 'CHOICES', 'COLOR_ENCODINGS', 'ENCODING_CHANNELS', 'ENCODINGS',
            'EncodingError', 'image_array']
 
@@ -58,10 +60,6 @@ ENCODINGS = tuple(COLOR_ENCODINGS) + ('mono8',)
 ENCODING_CHANNELS = {'mono8': 1, 'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4}
 
 _MARGIN_PX = 2
-
-
-class EncodingError(ValueError):
-    """An image has an unsupported encoding or inconsistent size fields."""
 
 
 def image_array(data, height: int, width: int, step: int, encoding: str) -> np.ndarray:
@@ -126,21 +124,22 @@ class BallDetector:
         lower = [int(x) for x in hsv_lower]
         upper = [int(x) for x in hsv_upper]
         if len(lower) != 3 or len(upper) != 3:
-            raise ValueError('hsv_lower and hsv_upper take three values (H, S, V)')
+            raise DetectorConfigError('hsv_lower and hsv_upper take three values (H, S, V)')
         for name, values in (('hsv_lower', lower), ('hsv_upper', upper)):
             if not (0 <= values[0] <= 179 and all(0 <= x <= 255 for x in values[1:])):
-                raise ValueError(f'{name} out of range (H 0..179, S and V 0..255): {values}')
+                raise DetectorConfigError(
+                    f'{name} out of range (H 0..179, S and V 0..255): {values}')
         if lower[1] > upper[1] or lower[2] > upper[2]:
-            raise ValueError(f'hsv_lower {lower} exceeds hsv_upper {upper} in S or V')
+            raise DetectorConfigError(f'hsv_lower {lower} exceeds hsv_upper {upper} in S or V')
         if not 0 <= int(mono_threshold) <= 255:
-            raise ValueError(f'mono_threshold must be in 0..255, got {mono_threshold}')
+            raise DetectorConfigError(f'mono_threshold must be in 0..255, got {mono_threshold}')
         if not 0 < min_area_px <= max_area_px:
-            raise ValueError(f'need 0 < min_area_px <= max_area_px, got {min_area_px}, '
-                             f'{max_area_px}')
+            raise DetectorConfigError(f'need 0 < min_area_px <= max_area_px, got {min_area_px}, '
+                                      f'{max_area_px}')
         if choice not in CHOICES:
-            raise ValueError(f'unknown choice {choice!r} (known: {", ".join(CHOICES)})')
+            raise DetectorConfigError(f'unknown choice {choice!r} (known: {", ".join(CHOICES)})')
         if int(search_window_px) < 0 or int(open_kernel_px) < 0:
-            raise ValueError('search_window_px and open_kernel_px must be >= 0')
+            raise DetectorConfigError('search_window_px and open_kernel_px must be >= 0')
         self._ranges = []
         if lower[0] <= upper[0]:
             self._ranges.append((np.array(lower, np.uint8), np.array(upper, np.uint8)))
@@ -176,19 +175,19 @@ class BallDetector:
         :param image: (H, W) uint8 for mono8, (H, W, 3 or 4) uint8 in the encoding's order
         :param encoding: one of :data:`ENCODINGS`
         :return: the centroid (u, v) in raw pixels, or None when there is no ball
-        :raises ValueError: an unknown encoding, an empty image, or an image whose shape does
+        :raises EncodingError: an unknown encoding, an empty image, or an image whose shape does
             not fit the encoding
         """
         if encoding not in ENCODINGS:
-            raise ValueError(f'unsupported encoding {encoding!r} (supported: '
-                             f'{", ".join(ENCODINGS)})')
+            raise EncodingError(f'unsupported encoding {encoding!r} (supported: '
+                                f'{", ".join(ENCODINGS)})')
         channels = 1 if encoding == 'mono8' else (4 if encoding.endswith('a8') else 3)
         if image.dtype != np.uint8 or image.ndim != (2 if channels == 1 else 3) or \
                 (channels > 1 and image.shape[2] != channels):
-            raise ValueError(f'image of shape {image.shape} and type {image.dtype} does not '
-                             f'fit encoding {encoding!r}')
+            raise EncodingError(f'image of shape {image.shape} and type {image.dtype} does not '
+                                f'fit encoding {encoding!r}')
         if image.size == 0:
-            raise ValueError(f'empty image of shape {image.shape}')
+            raise EncodingError(f'empty image of shape {image.shape}')
         self.stats['frames'] += 1
         height, width = image.shape[:2]
         result = None

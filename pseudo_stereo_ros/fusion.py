@@ -60,23 +60,20 @@ time (kind ``'interpolated'``, counted as ``late``).  An estimate is never NaN o
 from collections import Counter
 import math
 import operator
-from typing import Iterable, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
-
-import numpy as np
+from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .camera import Camera
+from .errors import FuserConfigError
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
+from .records import Estimate, Observation
 
 __all__ = [
     'DEFAULT_MAX_GAP_NS',
     'DEFAULT_SYNC_TOLERANCE_NS',
     'DROP_REASONS',
-    'Estimate',
     'Fuser',
     'FuserConfigError',
     'METHODS',
-    'Observation',
-    'estimates_to_array',
     'fuse',
 ]
 
@@ -104,38 +101,6 @@ DROP_REASONS = {
 _HISTORY = 8
 # The sync tolerance never exceeds this fraction of the camera's frame period.
 _SYNC_PERIOD_FRACTION = 0.25
-
-
-class FuserConfigError(ValueError):
-    """A fuser option is invalid; the message names it."""
-
-
-class Observation(NamedTuple):
-    """One detection: camera name, shutter stamp [integer ns], raw pixel (u, v)."""
-
-    camera: str
-    stamp_ns: int
-    u: float
-    v: float
-
-
-class Estimate(NamedTuple):
-    """
-    One 3D estimate at a shutter event.
-
-    ``x, y, z`` are world coordinates [m], ``stamp_ns`` the shutter stamp of
-    the event, ``camera`` the camera that fired, and ``kind`` one of
-    ``'pseudo'`` (paper method), ``'sync'`` (simultaneous pair),
-    ``'interpolated'`` (an observation that arrived after a later one of the
-    partner: Steps I-III at its own time) or ``'naive'``.
-    """
-
-    stamp_ns: int
-    camera: str
-    x: float
-    y: float
-    z: float
-    kind: str
 
 
 class _Frame:
@@ -478,8 +443,3 @@ def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
     """
     fuser = Fuser(cameras, **options)
     return fuser.process(observations), fuser.stats
-
-
-def estimates_to_array(estimates: Sequence[Estimate]) -> np.ndarray:
-    """Return the (N, 3) positions [m] of a list of estimates."""
-    return np.array([(e.x, e.y, e.z) for e in estimates], dtype=float).reshape(-1, 3)

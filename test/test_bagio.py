@@ -23,7 +23,7 @@ from pseudo_stereo_ros.formats.bagio import (bag_cameras, bag_message_counts, Ba
                                              image_message, image_point_topic, iter_raw,
                                              point_message, read_observations, read_positions,
                                              typestore, write_estimates, write_observations)
-from pseudo_stereo_ros.fusion import Estimate, Observation
+from pseudo_stereo_ros.records import Estimate, Observation
 from pseudo_stereo_ros.ros import messages
 from pseudo_stereo_ros.stamps import ns_to_sec_nanosec, sec_nanosec_to_ns, stamp_fields, stamp_ns
 import pytest

@@ -27,9 +27,10 @@ import math
 
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.fusion import estimates_to_array, fuse, Fuser, Observation
+from pseudo_stereo_ros.fusion import fuse, Fuser
 from pseudo_stereo_ros.geometry import (epipolar_lines, nearest_point_on_line, project_onto_lines,
                                         triangulate_rays)
+from pseudo_stereo_ros.records import Observation, positions_array
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
                                              make_scenario, observe, Scenario, shutter_stamps,
                                              truth_at)
@@ -62,7 +63,7 @@ def record(scenario, cameras, phases, fps=30.0, **options):
 def errors(estimates, scenario, epoch_ns=DEFAULT_EPOCH_NS):
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     truth = truth_at(scenario, stamps, epoch_ns=epoch_ns)
-    return np.linalg.norm(estimates_to_array(estimates) - truth, axis=1)
+    return np.linalg.norm(positions_array(estimates) - truth, axis=1)
 
 
 @pytest.mark.parametrize('delta12', [1 / 60, 1 / 90, 2 / 90, 0.004, 0.029])
@@ -112,7 +113,7 @@ def test_huge_stamps_lose_no_precision():
         stamps = [shutter_stamps(30.0, 0.3, epoch_ns=epoch),
                   shutter_stamps(30.0, 0.3, phase_s=1 / 90, epoch_ns=epoch)]
         observations = observe(scenario, cameras, stamps, quantization_px=0.0, epoch_ns=epoch)
-        results.append(estimates_to_array(fuse(cameras, observations)[0]))
+        results.append(positions_array(fuse(cameras, observations)[0]))
     np.testing.assert_allclose(results[0], results[1], atol=1e-12)
 
 
@@ -304,7 +305,7 @@ def test_paper_matches_an_independent_implementation_on_noisy_data(delta12):
     estimates, _ = fuse(cameras, observations)
     stamps, expected = reference_paper(cameras, observations)
     assert [e.stamp_ns for e in estimates] == list(stamps)
-    np.testing.assert_allclose(estimates_to_array(estimates), expected, atol=1e-9)
+    np.testing.assert_allclose(positions_array(estimates), expected, atol=1e-9)
 
 
 def test_every_pseudo_estimate_lies_on_the_newest_ray():

@@ -31,7 +31,7 @@ from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main
 from pseudo_stereo_ros.evaluation.holdout import estimates_at, holdout
 from pseudo_stereo_ros.formats.bagio import read_observations
-from pseudo_stereo_ros.fusion import Estimate
+from pseudo_stereo_ros.records import Estimate
 import pytest
 
 LFG = Path(__file__).resolve().parent / 'data' / 'lfg_table_tennis'

@@ -17,7 +17,7 @@
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
-from pseudo_stereo_ros.fusion import Estimate, Observation
+from pseudo_stereo_ros.records import Estimate, Observation
 from pseudo_stereo_ros.ros.messages import (
     array_to_image, calibration_to_camera_info, diagnostic_array, diagnostic_status,
     ENCODING_CHANNELS, EncodingError, estimate_to_point, image_point, image_to_array,

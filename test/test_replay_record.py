@@ -28,7 +28,7 @@ import numpy as np
 from pseudo_stereo_ros.formats.bagio import (bag_message_counts, image_message, IMAGE_TYPE,
                                              iter_raw, point_message, read_observations,
                                              write_messages, write_observations)
-from pseudo_stereo_ros.fusion import Observation
+from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.ros import replay_node
 from pseudo_stereo_ros.ros.record_node import RecordNode
 from pseudo_stereo_ros.ros.replay_node import ReplayNode

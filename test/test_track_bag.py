@@ -30,7 +30,8 @@ from pseudo_stereo_ros.formats.bagio import (bag_topics, GROUND_TRUTH_TOPIC, ima
                                              POSITION_TOPIC, read_images, read_positions,
                                              typestore, write_messages, write_observations)
 from pseudo_stereo_ros.formats.csv_io import read_estimates, write_observations as write_csv
-from pseudo_stereo_ros.fusion import fuse, Observation
+from pseudo_stereo_ros.fusion import fuse
+from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.ros import messages
 from pseudo_stereo_ros.sim.rendering import BallRenderer
 from pseudo_stereo_ros.sim.scenarios import (default_rig, make_scenario, observe, shutter_stamps,

@@ -50,7 +50,7 @@ import shutil
 import sys
 
 from pseudo_stereo_ros.formats.bagio import write_observations
-from pseudo_stereo_ros.fusion import Observation
+from pseudo_stereo_ros.records import Observation
 
 SESSIONS = ('n1_n1', 'n3_p1_v14', 'p2_p2')
 CALIBRATIONS = ('22276213_calibration.yaml', '22276209_calibration.yaml',

@@ -43,8 +43,9 @@ from typing import Optional, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from ..calibration import CalibrationError, CameraCalibration
+from ..calibration import CameraCalibration
 from ..camera import Camera
+from ..errors import CalibrationFitError
 from ..geometry import epipolar_distance
 
 __all__ = [
@@ -109,10 +110,6 @@ _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 _IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
 ImageInput = Union[str, os.PathLike, np.ndarray]
-
-
-class CalibrationFitError(CalibrationError):
-    """Input that cannot give a trustworthy calibration; the message says why and what to do."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,6 +14,8 @@
 
 """Subcommands of ``pseudo_stereo``; see :mod:`pseudo_stereo_ros.cli.main`."""
 
+from ..errors import UsageError
+
 __all__ = ['COMMAND_MODULES', 'UsageError']
 
 #: Modules of this package, in the order ``pseudo_stereo --help`` lists them.
@@ -26,7 +28,3 @@ COMMAND_MODULES = [
     'calibrate',
     'check',
 ]
-
-
-class UsageError(Exception):
-    """A bad argument or input file; the message names it and says why (exit status 2)."""

@@ -176,33 +176,30 @@ def run(args) -> int:
     plot = _check_output(args.plot, '--plot') if args.plot else out.with_name(
         f'{out.stem}_residuals.png')
     lines = None
-    try:
-        if args.mode == 'intrinsics':
-            board = parse_size(args.board, '--board')
-            try:
-                square = float(args.square)
-            except ValueError:
-                square = math.nan
-            if not (math.isfinite(square) and square > 0):
-                raise UsageError(f'--square {args.square!r}: expected a positive length [m]')
-            result = calibrate_intrinsics(
-                list_images(args.images), board=board, square_m=square,
-                camera_name=args.name or out.stem, dist_terms=args.dist_terms,
-                min_boards=args.min_boards)
-        elif args.mode == 'extrinsics':
-            intrinsics = load_calibration(args.intrinsics)
-            world, pixels, lines = read_correspondences(args.points)
-            result = calibrate_extrinsics(intrinsics, world, pixels, camera_name=args.name,
-                                          lines=lines)
-        else:
-            size = parse_size(args.image_size, '--image-size')
-            world, pixels, lines = read_correspondences(args.points)
-            terms = args.dist_terms if args.dist_terms is not None else auto_dist_terms(
-                len(world))
-            result = calibrate_full(world, pixels, size, camera_name=args.name or out.stem,
-                                    dist_terms=terms, lines=lines)
-    except CsvError as err:
-        raise UsageError(str(err)) from err
+    if args.mode == 'intrinsics':
+        board = parse_size(args.board, '--board')
+        try:
+            square = float(args.square)
+        except ValueError:
+            square = math.nan
+        if not (math.isfinite(square) and square > 0):
+            raise UsageError(f'--square {args.square!r}: expected a positive length [m]')
+        result = calibrate_intrinsics(
+            list_images(args.images), board=board, square_m=square,
+            camera_name=args.name or out.stem, dist_terms=args.dist_terms,
+            min_boards=args.min_boards)
+    elif args.mode == 'extrinsics':
+        intrinsics = load_calibration(args.intrinsics)
+        world, pixels, lines = read_correspondences(args.points)
+        result = calibrate_extrinsics(intrinsics, world, pixels, camera_name=args.name,
+                                      lines=lines)
+    else:
+        size = parse_size(args.image_size, '--image-size')
+        world, pixels, lines = read_correspondences(args.points)
+        terms = args.dist_terms if args.dist_terms is not None else auto_dist_terms(
+            len(world))
+        result = calibrate_full(world, pixels, size, camera_name=args.name or out.stem,
+                                dist_terms=terms, lines=lines)
     # Write before the long residual table, so a closed pipe (`| head`) cannot lose the file.
     save_calibration(result.calibration, out)
     plot_result(result, plot, lines=lines)

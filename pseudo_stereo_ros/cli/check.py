@@ -27,7 +27,7 @@ import numpy as np
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..calibrate.full import epipolar_check
-from ..formats.csv_io import CsvError, read_observations
+from ..formats.csv_io import read_observations
 
 __all__ = ['BAD_MEDIAN_PX', 'GOOD_MEDIAN_PX', 'HELP', 'NAME', 'add_arguments', 'run',
            'verdict']
@@ -68,10 +68,7 @@ def run(args) -> int:
     if len(cameras) != 2:
         raise UsageError(f'--camera: check compares exactly two cameras, got {len(cameras)}')
     max_gap_ns = seconds_to_ns(args.max_gap_s, '--max-gap-s')
-    try:
-        observations = read_observations(args.input)
-    except CsvError as err:
-        raise UsageError(str(err)) from err
+    observations = read_observations(args.input)
     (name_a, cam_a), (name_b, cam_b) = cameras.items()
     tracks = {}
     for name in (name_a, name_b):

@@ -30,7 +30,7 @@ from pathlib import Path
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..evaluation.holdout import holdout, HOLDOUT_METHODS
-from ..formats.bagio import BagError, read_observations
+from ..formats.bagio import read_observations
 
 NAME = 'holdout'
 HELP = ('run two cameras of a bag through each method and score the estimates by reprojection '
@@ -68,12 +68,9 @@ def run(args: argparse.Namespace) -> int:
                else seconds_to_ns(args.max_gap, '--max-gap')}
     rows = []
     for bag in args.bags:
-        try:
-            observations = read_observations(bag, names)
-            results = holdout(cameras, observations, inputs=args.inputs,
-                              held_out=args.held_out, methods=args.methods, **options)
-        except (BagError, ValueError) as err:
-            raise UsageError(str(err)) from err
+        observations = read_observations(bag, names)
+        results = holdout(cameras, observations, inputs=args.inputs,
+                          held_out=args.held_out, methods=args.methods, **options)
         for method, result in results.items():
             rows.append((Path(bag).name, method, result.count, result.median_px, result.p90_px,
                          result.mean_px))

@@ -13,12 +13,13 @@
 # limitations under the License.
 
 """
-The ``pseudo_stereo`` command line: one subcommand per module of :mod:`.commands`.
+The ``pseudo_stereo`` command line: one subcommand per module of :mod:`pseudo_stereo_ros.cli`.
 
 Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
-``run(args) -> int``.  Errors a user can fix (:class:`UsageError` and the
-core's error classes) print one line naming the input and the reason and exit
-with status 2; nothing else is caught, so bugs still show their traceback.
+``run(args) -> int``.  Errors a user can fix
+(:class:`~pseudo_stereo_ros.errors.PseudoStereoError` and its subclasses) print
+one line naming the input and the reason and exit with status 2; nothing else
+is caught, so bugs still show their traceback.
 """
 
 import argparse
@@ -26,8 +27,8 @@ import importlib
 import sys
 from typing import List, Optional
 
-from . import COMMAND_MODULES, UsageError
-from ..calibration import CalibrationError
+from . import COMMAND_MODULES
+from ..errors import PseudoStereoError
 
 __all__ = ['main']
 
@@ -52,7 +53,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)
-    except (UsageError, CalibrationError) as err:
+    except PseudoStereoError as err:
         print(f'pseudo_stereo {args.command}: error: {err}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

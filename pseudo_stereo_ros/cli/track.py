@@ -39,9 +39,9 @@ from ..evaluation.table1 import score
 from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_point_topic,
                              image_topic, read_images, read_observations as read_bag_observations,
                              read_positions, write_estimates as write_bag_estimates)
-from ..formats.csv_io import CsvError, read_observations, read_truth, write_estimates
-from ..fusion import (DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser,
-                      FuserConfigError, METHODS, Observation)
+from ..formats.csv_io import read_observations, read_truth, write_estimates
+from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
+from ..records import Observation
 
 NAME = 'track'
 HELP = ('run the fuser offline on observations (stamp_ns,camera,u,v CSV, or image points or '
@@ -186,28 +186,22 @@ def run(args) -> int:
     options = {'method': args.method,
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap')}
-    try:
-        fuser = Fuser(cameras, **options)
-    except FuserConfigError as err:
-        raise UsageError(str(err)) from err
+    fuser = Fuser(cameras, **options)
     notes = []
-    try:
-        truth = read_truth(args.truth) if args.truth else None
-        truth_name = args.truth
-        if args.input is not None:
-            observations = read_observations(args.input, cameras)
-            source = args.input
-        else:
-            parameters = (detector_parameters(args.detector_params)
-                          if args.detector_params else {})
-            observations, notes = bag_observations(args.bag, list(cameras), parameters)
-            source = args.bag
-            if truth is None and GROUND_TRUTH_TOPIC in bag_topics(args.bag):
-                positions = read_positions(args.bag, GROUND_TRUTH_TOPIC)
-                truth = _truth_arrays(positions)
-                truth_name = f'{args.bag} {GROUND_TRUTH_TOPIC}'
-    except (CsvError, BagError) as err:
-        raise UsageError(str(err)) from err
+    truth = read_truth(args.truth) if args.truth else None
+    truth_name = args.truth
+    if args.input is not None:
+        observations = read_observations(args.input, cameras)
+        source = args.input
+    else:
+        parameters = (detector_parameters(args.detector_params)
+                      if args.detector_params else {})
+        observations, notes = bag_observations(args.bag, list(cameras), parameters)
+        source = args.bag
+        if truth is None and GROUND_TRUTH_TOPIC in bag_topics(args.bag):
+            positions = read_positions(args.bag, GROUND_TRUTH_TOPIC)
+            truth = _truth_arrays(positions)
+            truth_name = f'{args.bag} {GROUND_TRUTH_TOPIC}'
     estimates = fuser.process(observations)
     result = None
     if truth is not None and (estimates or args.truth):
@@ -217,16 +211,10 @@ def run(args) -> int:
             raise UsageError(f'truth {truth_name}: {err}') from err
     targets = []
     if args.output is not None:
-        try:
-            write_estimates(args.output, estimates)
-        except CsvError as err:
-            raise UsageError(str(err)) from err
+        write_estimates(args.output, estimates)
         targets.append(args.output)
     if args.output_bag is not None:
-        try:
-            write_bag_estimates(args.output_bag, estimates, frame_id=args.world_frame)
-        except BagError as err:
-            raise UsageError(str(err)) from err
+        write_bag_estimates(args.output_bag, estimates, frame_id=args.world_frame)
         targets.append(f'{args.output_bag} (/ball/position)')
     for note in notes:
         print(note, file=sys.stderr)

@@ -43,8 +43,10 @@ from typing import Dict, Mapping, NamedTuple, Optional, Sequence
 import numpy as np
 
 from ..camera import Camera
-from ..fusion import DEFAULT_MAX_GAP_NS, fuse, Observation
+from ..errors import UsageError
+from ..fusion import DEFAULT_MAX_GAP_NS, fuse
 from ..geometry import triangulate_rays
+from ..records import Observation
 
 __all__ = [
     'HOLDOUT_METHODS',
@@ -209,13 +211,13 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
     inputs = list(inputs)
     for name in inputs + [held_out]:
         if name not in cameras:
-            raise ValueError(f'no camera {name!r} (have: {", ".join(cameras)})')
+            raise UsageError(f'no camera {name!r} (have: {", ".join(cameras)})')
     if len(set(inputs)) != 2 or held_out in inputs:
-        raise ValueError(f'need two distinct input cameras and another held-out camera, got '
+        raise UsageError(f'need two distinct input cameras and another held-out camera, got '
                          f'inputs {inputs} and held-out {held_out!r}')
     for method in methods:
         if method not in HOLDOUT_METHODS:
-            raise ValueError(f'unknown method {method!r} (known: {", ".join(HOLDOUT_METHODS)})')
+            raise UsageError(f'unknown method {method!r} (known: {", ".join(HOLDOUT_METHODS)})')
     gap = DEFAULT_MAX_GAP_NS if max_gap_ns is None else int(max_gap_ns)
     rows = sorted((o.stamp_ns, o.u, o.v) for o in observations if o.camera == held_out)
     stamps = np.array([r[0] for r in rows], dtype=np.int64)

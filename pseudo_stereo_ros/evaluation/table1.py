@@ -28,7 +28,8 @@ from typing import Dict, List, NamedTuple, Sequence
 import numpy as np
 
 from ..camera import Camera
-from ..fusion import Estimate, estimates_to_array, fuse, Observation
+from ..fusion import fuse
+from ..records import Estimate, Observation, positions_array
 from ..sim.scenarios import make_scenario, observe, shutter_stamps, truth_at
 
 __all__ = [
@@ -128,7 +129,7 @@ def score(estimates: Sequence[Estimate], truth_stamps: np.ndarray,
     index = np.clip(index, 0, len(truth_stamps) - 1)
     if not np.array_equal(truth_stamps[index], stamps):
         raise ValueError('an estimate stamp has no ground truth')
-    error = estimates_to_array(estimates) - truth_points[index]
+    error = positions_array(estimates) - truth_points[index]
     return Score(float(np.mean(np.abs(error)) * 1e3),
                  float(np.mean(np.linalg.norm(error, axis=1)) * 1e3), len(estimates))
 
@@ -232,7 +233,7 @@ def plot_figure6(results: Dict, path) -> None:
         axes.plot(truth[:, 0], truth[:, 1], truth[:, 2], 'k-', lw=1, label='truth')
         for label, style in (('unsynchronized', 'rx'), ('proposed', 'b.')):
             cell, estimates, _ = results[label][column]
-            points = estimates_to_array(estimates) * 1e3
+            points = positions_array(estimates) * 1e3
             axes.plot(points[:, 0], points[:, 1], points[:, 2], style, ms=4,
                       label=f'{label} ({cell.mae_mm:.1f} mm)')
         axes.set_title(f'({"abc"[index]}) {column}')

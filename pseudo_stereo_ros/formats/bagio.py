@@ -35,6 +35,8 @@ reason.  This module imports rosbags only, never rclpy.
 import os
 from pathlib import Path
 import re
+import sqlite3
+import struct
 from typing import Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -42,12 +44,13 @@ from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterEr
 from rosbags.typesys import get_typestore, Stores
 
 from ..detection import EncodingError, image_array
+from ..errors import BagError
 
 try:
     from rosbags.rosbag2 import CompressionFormat, CompressionMode
 except ImportError:  # rosbags < 0.11 nests them in Writer
     CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
-from ..fusion import Estimate, Observation
+from ..records import Estimate, Observation
 from ..stamps import stamp_fields, stamp_ns as stamp_to_ns
 
 __all__ = [
@@ -86,16 +89,13 @@ GROUND_TRUTH_TOPIC = '/ball/ground_truth'
 
 _IMAGE_POINT_RE = re.compile(r'^/([A-Za-z_][A-Za-z0-9_]*)/ball/image_point$')
 _STORAGE = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
-# A damaged bag makes rosbags and the mcap / sqlite / CDR layers under it raise almost anything
-# (ReaderError, struct.error, OverflowError, KeyError, UnicodeDecodeError, ...); reading is the
-# only thing inside these handlers, so every such error means "this bag is damaged".
-_READ_ERRORS = (ReaderError, Exception)
+# A damaged bag makes rosbags and the mcap / sqlite / CDR layers under it raise one of these;
+# reading is the only thing inside these handlers, so each means "this bag is damaged".  Other
+# exceptions (a bug here) keep their traceback.
+_READ_ERRORS = (ReaderError, OSError, EOFError, struct.error, sqlite3.DatabaseError, OverflowError,
+                KeyError, IndexError, TypeError, ValueError, UnicodeDecodeError)
 
 _typestore = None
-
-
-class BagError(ValueError):
-    """A bag cannot be read or written; the message names the bag and the reason."""
 
 
 def typestore():

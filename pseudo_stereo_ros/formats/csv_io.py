@@ -33,7 +33,8 @@ from typing import Collection, Iterable, List, Optional, Sequence
 
 import numpy as np
 
-from ..fusion import Estimate, Observation
+from ..errors import CsvError
+from ..records import Estimate, Observation
 
 __all__ = [
     'CsvError',
@@ -51,10 +52,6 @@ __all__ = [
 OBSERVATION_COLUMNS = ('stamp_ns', 'camera', 'u', 'v')
 ESTIMATE_COLUMNS = ('stamp_ns', 'camera', 'x', 'y', 'z')
 TRUTH_COLUMNS = ('stamp_ns', 'x', 'y', 'z')
-
-
-class CsvError(ValueError):
-    """A CSV input is malformed; the message names the file, the line and the reason."""
 
 
 def _rows(path, columns: Sequence[str]):

@@ -39,7 +39,8 @@ from visualization_msgs.msg import Marker
 from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
                        point_to_observation, trail_marker)
 from .node_tools import declare, load_cameras, run_node, StartupError
-from ..fusion import DROP_REASONS, Fuser, METHODS, Observation
+from ..fusion import DROP_REASONS, Fuser, METHODS
+from ..records import Observation
 from ..reorder import ReorderBuffer
 
 __all__ = ['FuserNode', 'main']

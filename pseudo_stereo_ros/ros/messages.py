@@ -25,7 +25,7 @@ C = 4).  Rows may be padded (``step > width * C``); the padding is dropped.
 """
 
 import array
-from typing import Iterable, Mapping, Optional, Sequence, Tuple
+from typing import Iterable, Mapping, Optional, Sequence, Tuple, Union
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +37,7 @@ from visualization_msgs.msg import Marker
 
 from ..calibration import CameraCalibration
 from ..detection import ENCODING_CHANNELS, EncodingError, image_array
-from ..fusion import Estimate, Observation
+from ..records import Estimate, GroundTruth, Observation
 # The ns <-> (sec, nanosec) arithmetic, shared with bagio.
 from ..stamps import stamp_fields, stamp_ns
 
@@ -125,7 +125,7 @@ def image_point(image_header: Header, u: float, v: float) -> PointStamped:
     return PointStamped(header=image_header, point=Point(x=float(u), y=float(v), z=0.0))
 
 
-def estimate_to_point(estimate: Estimate, frame_id: str) -> PointStamped:
+def estimate_to_point(estimate: Union[Estimate, GroundTruth], frame_id: str) -> PointStamped:
     """
     Return an estimate as a ``/ball/position`` message.
 

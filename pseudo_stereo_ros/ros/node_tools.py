@@ -38,6 +38,7 @@ from rclpy.node import Node
 
 from ..calibration import CalibrationError, load_calibration
 from ..camera import Camera
+from ..errors import StartupError
 from ..sim.scenarios import config_dir
 
 __all__ = [
@@ -53,10 +54,6 @@ __all__ = [
 STARTUP_ERRORS = (CalibrationError, InvalidParameterTypeException,
                   InvalidParameterValueException, ParameterException,
                   ParameterUninitializedException, ValueError, FileNotFoundError)
-
-
-class StartupError(ValueError):
-    """A parameter is invalid; the message names the parameter and says why."""
 
 
 def declare(node: Node, name: str, default, description: str, *,

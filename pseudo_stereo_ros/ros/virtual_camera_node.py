@@ -37,7 +37,7 @@ from .messages import array_to_image, calibration_to_camera_info, estimate_to_po
 from .node_tools import declare, run_node, StartupError
 from ..calibration import load_calibration
 from ..camera import Camera
-from ..fusion import Estimate
+from ..records import GroundTruth
 from ..sim.rendering import BallRenderer
 from ..sim.scenarios import config_dir, make_scenario, SCENARIOS
 
@@ -141,7 +141,7 @@ class VirtualCameraNode(Node):
         else:
             position = self.scenario.position(np.array([seconds]))[0]
             truth = estimate_to_point(
-                Estimate(stamp, self.camera.name, *map(float, position), 'truth'), 'world')
+                GroundTruth(stamp, *map(float, position)), 'world')
         self._prepared = (
             index,
             array_to_image(self.renderer.render(position), 'bgr8', stamp, self.frame_id),

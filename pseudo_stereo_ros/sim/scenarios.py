@@ -31,7 +31,7 @@ import numpy as np
 
 from ..calibration import CameraCalibration
 from ..camera import Camera
-from ..fusion import Observation
+from ..records import Observation
 
 __all__ = [
     'DEFAULT_EPOCH_NS',
