@@ -27,8 +27,8 @@ import math
 
 import cv2
 import numpy as np
-from pseudo_stereo_ros.calibrate.full import (calibrate_extrinsics, calibrate_full,
-                                              calibrate_intrinsics, CalibrationFitError)
+from pseudo_stereo_ros.calibrate import (calibrate_extrinsics, calibrate_full,
+                                         calibrate_intrinsics, CalibrationFitError)
 from pseudo_stereo_ros.calibration import CalibrationError, load_calibration, save_calibration
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main

@@ -19,7 +19,7 @@ import math
 
 import cv2
 import numpy as np
-from pseudo_stereo_ros.calibrate.full import epipolar_check
+from pseudo_stereo_ros.calibrate import epipolar_check
 from pseudo_stereo_ros.calibration import save_calibration
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main

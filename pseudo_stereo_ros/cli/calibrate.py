@@ -33,9 +33,9 @@ from typing import Optional, Tuple
 import numpy as np
 
 from . import UsageError
-from ..calibrate.full import (auto_dist_terms, calibrate_extrinsics, calibrate_full,
-                              calibrate_intrinsics, CalibrationResult, DISTORTION_TERMS,
-                              list_images)
+from ..calibrate import (auto_dist_terms, calibrate_extrinsics, calibrate_full,
+                         calibrate_intrinsics, CalibrationResult, DISTORTION_TERMS,
+                         list_images)
 from ..calibration import load_calibration, save_calibration
 from ..formats.csv_io import CsvError
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
-from ..calibrate.full import epipolar_check
+from ..calibrate import epipolar_check
 from ..formats.csv_io import read_observations
 
 __all__ = ['BAD_MEDIAN_PX', 'GOOD_MEDIAN_PX', 'HELP', 'NAME', 'add_arguments', 'run',
