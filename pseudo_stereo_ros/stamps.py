@@ -26,10 +26,21 @@ near 1.7e18 ns loses ~200 ns as a float).  ROS-free: stdlib only.
 
 from typing import Dict, Tuple
 
-__all__ = ['NS_PER_S', 'ns_to_sec_nanosec', 'sec_nanosec_to_ns', 'stamp_fields', 'stamp_ns']
+__all__ = ['NS_PER_S', 'ns_to_sec_nanosec', 'sec_nanosec_to_ns', 'seconds_to_ns', 'stamp_fields',
+           'stamp_ns']
 
 #: Nanoseconds per second.
 NS_PER_S = 1_000_000_000
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """
+    Return a duration or time in seconds as integer nanoseconds (rounded to the nearest ns).
+
+    :param seconds: finite seconds (a float carries ~0.1 us at epoch times; durations only)
+    :return: the value [ns]
+    """
+    return int(round(seconds * NS_PER_S))
 
 
 def ns_to_sec_nanosec(stamp_ns: int) -> Tuple[int, int]:

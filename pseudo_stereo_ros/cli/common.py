@@ -19,6 +19,7 @@ import math
 from typing import Dict, Sequence
 
 from . import UsageError
+from .. import stamps
 from ..camera import Camera
 
 __all__ = ['add_camera_argument', 'cameras_from_args', 'check_pixel_options', 'positive',
@@ -61,7 +62,7 @@ def seconds_to_ns(value: float, option: str) -> int:
     if not (value >= 0 and math.isfinite(value)):
         raise UsageError(f'{option}: must be a finite, non-negative number of seconds, '
                          f'got {value}')
-    return int(round(value * 1e9))
+    return stamps.seconds_to_ns(value)
 
 
 def check_pixel_options(args) -> None:

@@ -51,7 +51,7 @@ try:
 except ImportError:  # rosbags < 0.11 nests them in Writer
     CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
 from ..records import Estimate, Observation
-from ..stamps import stamp_fields, stamp_ns as stamp_to_ns
+from ..stamps import stamp_fields, stamp_ns
 
 __all__ = [
     'BagError',
@@ -264,7 +264,7 @@ def _check_types(path: PathLike, topics: Sequence[str], expected: str = IMAGE_PO
 
 
 def _stamp_ns(msg) -> int:
-    return stamp_to_ns(msg.header.stamp)
+    return stamp_ns(msg.header.stamp)
 
 
 def read_observations(path: PathLike, cameras: Optional[Sequence[str]] = None

@@ -42,6 +42,7 @@ from .node_tools import declare, load_cameras, run_node, StartupError
 from ..fusion import DROP_REASONS, Fuser, METHODS
 from ..records import Observation
 from ..reorder import ReorderBuffer
+from ..stamps import seconds_to_ns
 
 __all__ = ['FuserNode', 'main']
 
@@ -49,7 +50,7 @@ __all__ = ['FuserNode', 'main']
 def _seconds_to_ns(name: str, value: float) -> int:
     if not value >= 0:
         raise StartupError(f'parameter {name!r}: must be >= 0 s, got {value}')
-    return int(round(value * 1e9))
+    return seconds_to_ns(value)
 
 
 class FuserNode(Node):

@@ -39,7 +39,7 @@ from ..calibration import CameraCalibration
 from ..detection import ENCODING_CHANNELS, EncodingError, image_array
 from ..records import Estimate, GroundTruth, Observation
 # The ns <-> (sec, nanosec) arithmetic, shared with bagio.
-from ..stamps import stamp_fields, stamp_ns
+from ..stamps import stamp_fields, stamp_ns as stamp_to_ns
 
 __all__ = [
     'ENCODING_CHANNELS',
@@ -60,8 +60,6 @@ __all__ = [
     'trail_marker',
 ]
 
-_NS_PER_S = 1_000_000_000
-
 #: Diagnostic level names -> DiagnosticStatus level bytes.
 _LEVELS = {
     'ok': DiagnosticStatus.OK,
@@ -72,11 +70,6 @@ _LEVELS = {
 
 
 # -- time -----------------------------------------------------------------------------------------
-
-def stamp_to_ns(stamp: Time) -> int:
-    """Return a ``builtin_interfaces/Time`` as integer nanoseconds."""
-    return stamp_ns(stamp)
-
 
 def ns_to_stamp(stamp_ns: int) -> Time:
     """

@@ -51,6 +51,7 @@ from rclpy.serialization import deserialize_message
 from .messages import ns_to_stamp
 from .node_tools import declare, init_context, logger_name, STARTUP_ERRORS, StartupError
 from ..formats.bagio import bag_message_counts, BagError, iter_raw
+from ..stamps import seconds_to_ns
 
 __all__ = ['ReplayNode', 'main', 'message_class']
 
@@ -186,7 +187,7 @@ class ReplayNode(Node):
     def _play_once(self):
         start_bag: Optional[int] = None
         start_wall = None
-        offset_ns = int(round(self.start_offset_s * 1e9))
+        offset_ns = seconds_to_ns(self.start_offset_s)
         for topic, _, log_time, data in iter_raw(self.bag, self.topics):
             if self._stop.is_set() or not self.context.ok():
                 return
