@@ -36,6 +36,7 @@ __all__ = [
     'EncodingError',
     'FuserConfigError',
     'PseudoStereoError',
+    'RigError',
     'StartupError',
     'UsageError',
 ]
@@ -55,6 +56,10 @@ class CalibrationFitError(CalibrationError):
 
 class DetectorConfigError(PseudoStereoError):
     """A ball detector option is invalid; the message names it."""
+
+
+class RigError(PseudoStereoError):
+    """A set of cameras is invalid: too few, or an empty or repeated name."""
 
 
 class EncodingError(PseudoStereoError):

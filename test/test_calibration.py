@@ -17,7 +17,8 @@
 import numpy as np
 from pseudo_stereo_ros.calibration import (calibration_to_dict, CalibrationError,
                                            load_calibration, save_calibration)
-from pseudo_stereo_ros.sim.scenarios import config_dir, look_at_calibration
+from pseudo_stereo_ros.rig import config_dir
+from pseudo_stereo_ros.sim.scenarios import look_at_calibration
 import pytest
 import yaml
 

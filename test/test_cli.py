@@ -18,7 +18,7 @@ import subprocess
 import sys
 
 from pseudo_stereo_ros.cli.main import main
-from pseudo_stereo_ros.sim.scenarios import config_dir
+from pseudo_stereo_ros.rig import config_dir
 import pytest
 
 RIG = config_dir() / 'rig'

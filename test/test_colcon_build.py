@@ -73,8 +73,8 @@ def _installed_env(install: Path) -> dict:
 
 
 def test_installed_package_finds_its_installed_config(install, tmp_path):
-    code = ('import pseudo_stereo_ros.sim.scenarios as s; '
-            'print(s.__file__); print(s.config_dir()); '
+    code = ('import pseudo_stereo_ros.rig as r; import pseudo_stereo_ros.sim.scenarios as s; '
+            'print(r.__file__); print(r.config_dir()); '
             's.default_rig()')
     result = subprocess.run([sys.executable, '-c', code], env=_installed_env(install),
                             cwd=tmp_path, capture_output=True, text=True, timeout=60)

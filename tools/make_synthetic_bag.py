@@ -44,13 +44,13 @@ import shutil
 import sys
 
 import numpy as np
-
 from pseudo_stereo_ros.formats.bagio import (GROUND_TRUTH_TOPIC, image_message, IMAGE_POINT_TYPE,
                                              image_topic, IMAGE_TYPE, point_message,
                                              write_messages)
+from pseudo_stereo_ros.rig import config_dir
 from pseudo_stereo_ros.sim.rendering import BallRenderer
-from pseudo_stereo_ros.sim.scenarios import (config_dir, DEFAULT_EPOCH_NS, default_rig,
-                                             make_scenario, shutter_stamps, truth_at)
+from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario,
+                                             shutter_stamps, truth_at)
 
 README = """\
 # Synthetic images: two virtual cameras, rendered ball

@@ -16,11 +16,11 @@
 
 import argparse
 import math
-from typing import Dict, Sequence
+from typing import Sequence
 
 from . import UsageError
 from .. import stamps
-from ..camera import Camera
+from ..rig import Rig
 
 __all__ = ['add_camera_argument', 'cameras_from_args', 'check_pixel_options', 'positive',
            'seconds_to_ns']
@@ -33,9 +33,9 @@ def add_camera_argument(parser: argparse.ArgumentParser, *, required: bool = Tru
                         help='a camera name and its calibration file (give one per camera)')
 
 
-def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Dict[str, Camera]:
+def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
     """
-    Parse ``NAME=CALIB.yaml`` values into cameras, in the given order.
+    Parse ``NAME=CALIB.yaml`` values into a rig (a mapping name -> camera), in the given order.
 
     The name given on the command line is the name used in the data (it
     overrides the file's camera_name).
@@ -43,18 +43,18 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Dict[str, C
     :raises UsageError: malformed value, duplicate name or too few cameras
     :raises CalibrationError: a calibration file is missing or malformed
     """
-    cameras: Dict[str, Camera] = {}
+    files = []
     for value in values:
         name, sep, path = value.partition('=')
         name, path = name.strip(), path.strip()
         if not sep or not name or not path:
             raise UsageError(f'--camera {value!r}: expected NAME=CALIB.yaml')
-        if name in cameras:
+        if name in (known for known, _ in files):
             raise UsageError(f'--camera {value!r}: camera {name!r} given twice')
-        cameras[name] = Camera.from_file(path, name=name)
-    if len(cameras) < minimum:
-        raise UsageError(f'--camera: need at least {minimum} cameras, got {len(cameras)}')
-    return cameras
+        files.append((name, path))
+    if len(files) < minimum:
+        raise UsageError(f'--camera: need at least {minimum} cameras, got {len(files)}')
+    return Rig.from_files(files)
 
 
 def seconds_to_ns(value: float, option: str) -> int:

@@ -425,7 +425,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             parser.error(f'--{key} must be positive')
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     # Before any DDS participant exists: 900 kB frames need a larger shared-memory segment.
-    from ..sim.scenarios import config_dir
+    from ..rig import config_dir
     os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
                           str(config_dir() / 'fastdds_large_images.xml'))
     print('bench_pipeline: 640x480 frames, default rig, spiral; times in ms per frame or event;')

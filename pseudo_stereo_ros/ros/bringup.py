@@ -45,7 +45,8 @@ from .monitor_node import MonitorNode
 from .node_tools import init_context, STARTUP_ERRORS
 from .virtual_camera_node import VirtualCameraNode
 from ..fusion import METHODS
-from ..sim.scenarios import config_dir, SCENARIOS
+from ..rig import config_dir
+from ..sim.scenarios import SCENARIOS
 
 __all__ = ['build_parser', 'main', 'write_plot']
 

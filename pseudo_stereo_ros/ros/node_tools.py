@@ -23,7 +23,6 @@ params file rcl cannot read or parse (``--ros-args --params-file F``) is
 reported the same way by :func:`init_context`.
 """
 
-import dataclasses
 import re
 import sys
 from typing import Callable, List, Optional, Sequence
@@ -36,10 +35,9 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
-from ..calibration import CalibrationError, load_calibration
 from ..camera import Camera
-from ..errors import StartupError
-from ..sim.scenarios import config_dir
+from ..errors import CalibrationError, RigError, StartupError
+from ..rig import config_dir, Rig
 
 __all__ = [
     'StartupError',
@@ -107,26 +105,23 @@ def load_cameras(camera_names: Sequence[str], calibration_files: Sequence[str]) 
     if len(names) < 2 or any(not isinstance(n, str) or not n for n in names):
         raise StartupError(f'parameter camera_names: need at least two non-empty camera names, '
                            f'got {names}')
-    if len(set(names)) != len(names):
-        raise StartupError(f'parameter camera_names: names must be unique, got {names}')
-    files = list(calibration_files or [])
-    if not files:
-        files = [str(config_dir() / 'rig' / f'{name}.yaml') for name in names]
+    files = list(calibration_files or []) or [
+        str(config_dir() / 'rig' / f'{name}.yaml') for name in names]
     if len(files) != len(names):
         raise StartupError(f'parameter calibration_files: {len(files)} files for '
                            f'{len(names)} camera_names (one per camera, same order)')
     cameras = []
     for index, (name, path) in enumerate(zip(names, files)):
         try:
-            calibration = load_calibration(path)
-        except (CalibrationError, OSError) as err:
+            # The topic name is what the fuser matches on; keep the file's intrinsics and pose.
+            cameras.append(Camera.from_file(path, name=name))
+        except CalibrationError as err:
             raise StartupError(f'parameter calibration_files[{index}] (camera {name}): '
                                f'{err}') from err
-        if calibration.camera_name != name:
-            # The topic name is what the fuser matches on; keep the file's intrinsics and pose.
-            calibration = dataclasses.replace(calibration, camera_name=name)
-        cameras.append(Camera(calibration))
-    return cameras
+    try:
+        return Rig(cameras).cameras
+    except RigError as err:
+        raise StartupError(f'parameter camera_names: {err}') from err
 
 
 def logger_name(default_name: str, args: Optional[Sequence[str]] = None) -> str:

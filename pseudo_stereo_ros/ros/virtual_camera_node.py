@@ -38,8 +38,9 @@ from .node_tools import declare, run_node, StartupError
 from ..calibration import load_calibration
 from ..camera import Camera
 from ..records import GroundTruth
+from ..rig import config_dir
 from ..sim.rendering import BallRenderer
-from ..sim.scenarios import config_dir, make_scenario, SCENARIOS
+from ..sim.scenarios import make_scenario, SCENARIOS
 
 __all__ = ['VirtualCameraNode', 'main']
 

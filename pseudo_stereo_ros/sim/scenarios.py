@@ -23,8 +23,6 @@ everything downstream is exercised with real-sized stamps.
 
 from dataclasses import dataclass
 import math
-import os
-from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
@@ -32,12 +30,12 @@ import numpy as np
 from ..calibration import CameraCalibration
 from ..camera import Camera
 from ..records import Observation
+from ..rig import Rig
 
 __all__ = [
     'DEFAULT_EPOCH_NS',
     'SCENARIOS',
     'Scenario',
-    'config_dir',
     'default_rig',
     'look_at_calibration',
     'make_scenario',
@@ -252,26 +250,6 @@ def look_at_calibration(name: str, position: Sequence[float], target: Sequence[f
         translation=-rotation @ position)
 
 
-def config_dir() -> Path:
-    """
-    Return the package's config directory.
-
-    In a source tree or editable install it is ``config/`` beside the package;
-    in a colcon install it is ``share/pseudo_stereo_ros/config``.
-    """
-    source = Path(__file__).resolve().parents[2] / 'config'
-    if source.is_dir():
-        return source
-    prefix = Path(__file__).resolve()
-    for parent in prefix.parents:
-        candidate = parent / 'share' / 'pseudo_stereo_ros' / 'config'
-        if candidate.is_dir():
-            return candidate
-    raise FileNotFoundError('cannot find the pseudo_stereo_ros config directory '
-                            f'(looked beside {os.fspath(source.parent)} and in share/)')
-
-
 def default_rig() -> List[Camera]:
     """Return the two cameras of the default rig (``config/rig/camera{1,2}.yaml``)."""
-    rig = config_dir() / 'rig'
-    return [Camera.from_file(rig / 'camera1.yaml'), Camera.from_file(rig / 'camera2.yaml')]
+    return Rig.default().cameras
