@@ -37,3 +37,13 @@ def repo_dir() -> Path:
 def data_dir() -> Path:
     """Return test/data."""
     return DATA
+
+
+@pytest.fixture
+def context():
+    """Yield an rclpy context of this test only (rclpy imported here: core tests need none)."""
+    import rclpy
+    ctx = rclpy.Context()
+    rclpy.init(args=[], context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)

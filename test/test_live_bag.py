@@ -33,7 +33,6 @@ from pseudo_stereo_ros.ros.detector_node import DetectorNode
 from pseudo_stereo_ros.ros.fuser_node import FuserNode
 from pseudo_stereo_ros.ros.messages import point_to_xyz
 from pseudo_stereo_ros.ros.replay_node import ReplayNode
-import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -43,15 +42,6 @@ from geometry_msgs.msg import PointStamped  # noqa: I100 - message packages afte
 SYNTHETIC = Path(__file__).resolve().parent / 'data' / 'synthetic_images'
 BAG = SYNTHETIC / 'spiral'
 CAMERAS = ('camera1', 'camera2')
-
-
-@pytest.fixture
-def context():
-    """Yield an rclpy context of this test only."""
-    ctx = rclpy.Context()
-    rclpy.init(args=[], context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def _spin_until(executor, predicate, timeout_s):

@@ -47,15 +47,6 @@ _COUNTER = itertools.count()
 
 
 @pytest.fixture
-def context():
-    """Yield an rclpy context of this test only."""
-    ctx = rclpy.Context()
-    rclpy.init(args=[], context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
-@pytest.fixture
 def namespace():
     """Return a namespace no other test (or process) uses."""
     return f'/t{os.getpid()}_{next(_COUNTER)}'

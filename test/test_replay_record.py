@@ -44,14 +44,6 @@ LFG = Path(__file__).resolve().parent / 'data' / 'lfg_table_tennis'
 BIN = Path(sys.executable).parent
 
 
-@pytest.fixture
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
 def _small_bag(tmp_path, count=40):
     observations = sorted(read_observations(LFG / 'n3_p1_v14'), key=lambda o: o.stamp_ns)
     observations = observations[:count]
