@@ -22,17 +22,25 @@ extrinsics ``rotation_matrix`` (3x3) and ``translation`` (3 values, metres),
 with the convention ``x_cam = R @ x_world + t``.  Other camera_info keys
 (``rectification_matrix``, ``projection_matrix``, ``camera_model``) may be
 present and are ignored.
+
+Every key is read and checked by one function (``_camera_name``,
+``_image_size``, ``_camera_matrix``, ``_distortion``, ``_rotation``, the
+shared ``_matrix``); a new key gets its own.  Every error is one
+:class:`CalibrationError` line naming the file, the key (or the line and
+column of bad YAML) and the reason; non-finite numbers are refused in
+every numeric field.
 """
 
 from dataclasses import dataclass
 import math
 import os
-from typing import Any, Mapping, Union
+from typing import Any, Mapping, Optional, Tuple, Union
 
 import numpy as np
 import yaml
 
 from .errors import CalibrationError
+from .formats.yaml_io import read_yaml
 
 __all__ = [
     'CalibrationError',
@@ -57,6 +65,9 @@ DISTORTION_MODELS = {
 
 #: Largest allowed deviation of R @ R.T from identity (and of det(R) from 1).
 ROTATION_TOLERANCE = 1e-5
+
+#: Largest image side [px]: OpenCV keeps image sizes in 32-bit ints.
+MAX_IMAGE_SIZE_PX = 2 ** 31 - 1
 
 PathLike = Union[str, os.PathLike]
 
@@ -90,57 +101,157 @@ def _fail(source: str, key: str, reason: str) -> CalibrationError:
     return CalibrationError(f'{source}: key {key!r}: {reason}')
 
 
-def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.ndarray:
-    """Read ``key`` as {rows, cols, data}, a nested list or a flat list of the given shape."""
-    if key not in data:
+def _show(value: Any) -> str:
+    """Describe a YAML value in a few words for an error message."""
+    if isinstance(value, Mapping):
+        return 'a mapping'
+    if isinstance(value, list):
+        return f'a list of {len(value)}'
+    if value is None:
+        return 'nothing (null)'
+    if isinstance(value, bool):
+        return f'the boolean {value}'
+    if isinstance(value, str):
+        text = repr(value)
+        return f'the string {text if len(text) <= 40 else text[:37] + "..."}'
+    text = repr(value)
+    return text if len(text) <= 40 else f'a number of {len(text)} digits'
+
+
+def _integer(value: Any) -> Optional[int]:
+    """Return ``value`` as an int if it is a whole number (``640`` or ``640.0``), else None."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+        return int(value)
+    return None
+
+
+def _entry(data: Mapping[str, Any], key: str, source: str) -> Any:
+    if data.get(key) is None:
         raise _fail(source, key, 'missing')
-    value = data[key]
+    return data[key]
+
+
+def _numbers(value: Any, key: str, source: str) -> Tuple[np.ndarray, Optional[Tuple[int, int]]]:
+    """
+    Read a matrix value: ``{rows, cols, data}``, a nested list or a flat list of numbers.
+
+    :return: the finite values, flat, and the shape the value declares (rows and cols, or
+        the nesting), if any
+    """
+    declared = None
     if isinstance(value, Mapping):
         if 'data' not in value:
             raise _fail(source, key, "missing 'data' (expected {rows, cols, data})")
         rows, cols = value.get('rows'), value.get('cols')
-        values = value['data']
-        if rows is not None and cols is not None:
-            try:
-                declared = (int(rows), int(cols))
-            except (TypeError, ValueError):
-                raise _fail(source, key,
-                            f'rows/cols are not integers: {rows!r}, {cols!r}') from None
-            expected = shape if len(shape) == 2 else None
-            if expected is not None and declared != expected:
-                raise _fail(source, key, f'expected {expected[0]}x{expected[1]}, declared '
-                                         f'rows x cols = {declared[0]}x{declared[1]}')
-            if not isinstance(values, list) or len(values) != declared[0] * declared[1]:
-                count = len(values) if isinstance(values, list) else 'no list of'
-                raise _fail(source, key, f'rows x cols = {declared[0]}x{declared[1]} '
-                                         f'but data has {count} values')
-    else:
-        values = value
-    if any(isinstance(x, (bool, str)) for x in np.ravel(np.array(values, dtype=object))):
-        raise _fail(source, key, 'not a numeric matrix (holds a boolean or a string)')
-    try:
-        array = np.array(values, dtype=float)
-    except (TypeError, ValueError) as err:
-        raise _fail(source, key, f'not a numeric matrix ({err})') from err
+        if rows is not None or cols is not None:
+            declared = (_integer(rows), _integer(cols))
+            if None in declared or min(declared) < 1:
+                raise _fail(source, key, f'rows and cols must be positive integers, got '
+                                         f'{_show(rows)} and {_show(cols)}')
+        value = value['data']
+    if not isinstance(value, list):
+        raise _fail(source, key, f'expected a list of numbers, got {_show(value)}')
+    flat = value
+    if any(isinstance(item, list) for item in value):
+        if not all(isinstance(item, list) and len(item) == len(value[0]) for item in value):
+            raise _fail(source, key, 'not a matrix (rows that are not lists of equal length)')
+        flat = [x for row in value for x in row]
+        nested = (len(value), len(value[0]))
+        if declared is not None and declared != nested:
+            raise _fail(source, key, f'rows x cols = {declared[0]}x{declared[1]} but data is '
+                                     f'{nested[0]}x{nested[1]}')
+        declared = nested
+    numbers = []
+    for x in flat:
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise _fail(source, key, f'not a numeric matrix (holds {_show(x)})')
+        try:
+            numbers.append(float(x))
+        except OverflowError:  # an integer beyond the float range
+            numbers.append(math.inf)
+    array = np.array(numbers, dtype=float)
+    if not np.all(np.isfinite(array)):
+        raise _fail(source, key, 'contains a non-finite value')
+    if declared is not None and declared[0] * declared[1] != array.size:
+        raise _fail(source, key, f'rows x cols = {declared[0]}x{declared[1]} but data has '
+                                 f'{array.size} values')
+    return array, declared
+
+
+def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.ndarray:
+    """Read ``key`` as a finite matrix of the given shape ((3, 3), or (3,) for a vector)."""
+    array, declared = _numbers(_entry(data, key, source), key, source)
+    if len(shape) == 2 and declared is not None and declared != shape:
+        raise _fail(source, key, f'expected {shape[0]}x{shape[1]}, declared rows x cols = '
+                                 f'{declared[0]}x{declared[1]}')
     size = int(np.prod(shape))
     if array.size != size:
         raise _fail(source, key, f'expected {size} values for shape {shape}, got {array.size}')
-    if array.ndim > 1 and array.shape != shape and len(shape) > 1:
-        raise _fail(source, key, f'expected shape {shape}, got {array.shape}')
-    array = array.reshape(shape)
-    if not np.all(np.isfinite(array)):
-        raise _fail(source, key, 'contains a non-finite value')
-    return array
+    return array.reshape(shape)
 
 
-def _positive_int(data: Mapping[str, Any], key: str, source: str) -> int:
-    if key not in data:
-        raise _fail(source, key, 'missing')
-    value = data[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value) \
-            or value <= 0:
-        raise _fail(source, key, f'expected a positive integer, got {value!r}')
-    return int(value)
+# -- one reader per key -------------------------------------------------------------------------
+
+
+def _camera_name(data: Mapping[str, Any], source: str, raw_name: Optional[str]) -> str:
+    _entry(data, 'camera_name', source)
+    name = raw_name if raw_name is not None else data['camera_name']
+    if not isinstance(name, (str, int, float)) or isinstance(name, bool):
+        raise _fail(source, 'camera_name', f'expected a name, got {_show(name)}')
+    if isinstance(name, float) and name.is_integer():
+        name = int(name)
+    name = str(name).strip()
+    if not name:
+        raise _fail(source, 'camera_name', 'empty')
+    return name
+
+
+def _image_size(data: Mapping[str, Any], key: str, source: str) -> int:
+    value = _entry(data, key, source)
+    size = _integer(value)
+    if size is None or not 0 < size <= MAX_IMAGE_SIZE_PX:
+        raise _fail(source, key, f'expected a positive integer number of pixels (at most '
+                                 f'{MAX_IMAGE_SIZE_PX}), got {_show(value)}')
+    return size
+
+
+def _camera_matrix(data: Mapping[str, Any], source: str) -> np.ndarray:
+    camera_matrix = _matrix(data, 'camera_matrix', (3, 3), source)
+    fx, fy = camera_matrix[0, 0], camera_matrix[1, 1]
+    if fx <= 0 or fy <= 0:
+        raise _fail(source, 'camera_matrix', f'focal lengths must be positive, got {fx}, {fy}')
+    if not np.allclose(camera_matrix[2], (0.0, 0.0, 1.0)) or camera_matrix[1, 0] != 0:
+        raise _fail(source, 'camera_matrix', 'expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]]')
+    return camera_matrix
+
+
+def _distortion(data: Mapping[str, Any], source: str) -> Tuple[str, np.ndarray]:
+    """Read ``distortion_model`` and its ``distortion_coefficients``."""
+    model = str(_entry(data, 'distortion_model', source))
+    if model not in DISTORTION_MODELS:
+        raise _fail(source, 'distortion_model',
+                    f'unknown model {model!r} (known: {", ".join(DISTORTION_MODELS)})')
+    key = 'distortion_coefficients'
+    coeffs, _ = _numbers(_entry(data, key, source), key, source)
+    allowed = DISTORTION_MODELS[model]
+    if coeffs.size not in allowed:
+        raise _fail(source, key, f'model {model!r} takes {" or ".join(map(str, allowed))} '
+                                 f'coefficients, got {coeffs.size}')
+    return model, coeffs
+
+
+def _rotation(data: Mapping[str, Any], source: str) -> np.ndarray:
+    rotation = _matrix(data, 'rotation_matrix', (3, 3), source)
+    deviation = np.abs(rotation @ rotation.T - np.eye(3)).max()
+    det = np.linalg.det(rotation)
+    if deviation > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+        raise _fail(source, 'rotation_matrix',
+                    f'not a rotation (|R R^T - I| = {deviation:.2g}, det = {det:.6g})')
+    return rotation
 
 
 def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
@@ -153,59 +264,18 @@ def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
     :param raw_name: ``camera_name`` exactly as written in the file (YAML may
         have read a numeric name such as 22276213 as a number)
     :return: the validated calibration
-    :raises CalibrationError: naming the source, the key and the reason
+    :raises CalibrationError: naming the source, the key and the reason, in one line
     """
     if not isinstance(data, Mapping):
         raise CalibrationError(f'{source}: expected a YAML mapping of calibration keys, '
-                               f'got {type(data).__name__}')
-    if 'camera_name' not in data or data['camera_name'] is None:
-        raise _fail(source, 'camera_name', 'missing')
-    name = raw_name if raw_name is not None else data['camera_name']
-    if not isinstance(name, (str, int, float)) or isinstance(name, bool):
-        raise _fail(source, 'camera_name', f'expected a name, got {name!r}')
-    if isinstance(name, float) and name.is_integer():
-        name = int(name)
-    name = str(name).strip()
-    if not name:
-        raise _fail(source, 'camera_name', 'empty')
-
-    width = _positive_int(data, 'image_width', source)
-    height = _positive_int(data, 'image_height', source)
-    camera_matrix = _matrix(data, 'camera_matrix', (3, 3), source)
-    fx, fy = camera_matrix[0, 0], camera_matrix[1, 1]
-    if fx <= 0 or fy <= 0:
-        raise _fail(source, 'camera_matrix', f'focal lengths must be positive, got {fx}, {fy}')
-    if not np.allclose(camera_matrix[2], (0.0, 0.0, 1.0)) or camera_matrix[1, 0] != 0:
-        raise _fail(source, 'camera_matrix', 'expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]]')
-
-    if 'distortion_model' not in data:
-        raise _fail(source, 'distortion_model', 'missing')
-    model = str(data['distortion_model'])
-    if model not in DISTORTION_MODELS:
-        raise _fail(source, 'distortion_model',
-                    f'unknown model {model!r} (known: {", ".join(DISTORTION_MODELS)})')
-    raw_coeffs = data.get('distortion_coefficients')
-    if raw_coeffs is None:
-        raise _fail(source, 'distortion_coefficients', 'missing')
-    if isinstance(raw_coeffs, Mapping):
-        count = len(raw_coeffs.get('data') or [])
-    else:
-        count = len(raw_coeffs) if isinstance(raw_coeffs, list) else 0
-    allowed = DISTORTION_MODELS[model]
-    if count not in allowed:
-        raise _fail(source, 'distortion_coefficients',
-                    f'model {model!r} takes {" or ".join(map(str, allowed))} coefficients, '
-                    f'got {count}')
-    dist_coeffs = _matrix(data, 'distortion_coefficients', (count,), source)
-
-    rotation = _matrix(data, 'rotation_matrix', (3, 3), source)
-    deviation = np.abs(rotation @ rotation.T - np.eye(3)).max()
-    det = np.linalg.det(rotation)
-    if deviation > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
-        raise _fail(source, 'rotation_matrix',
-                    f'not a rotation (|R R^T - I| = {deviation:.2g}, det = {det:.6g})')
+                               f'got {_show(data)}')
+    name = _camera_name(data, source, raw_name)
+    width = _image_size(data, 'image_width', source)
+    height = _image_size(data, 'image_height', source)
+    camera_matrix = _camera_matrix(data, source)
+    model, dist_coeffs = _distortion(data, source)
+    rotation = _rotation(data, source)
     translation = _matrix(data, 'translation', (3,), source)
-
     for array in (camera_matrix, dist_coeffs, rotation, translation):
         array.setflags(write=False)
     return CameraCalibration(
@@ -218,26 +288,23 @@ def load_calibration(path: PathLike) -> CameraCalibration:
     """
     Read and validate one camera's calibration YAML file.
 
+    The file is read by :func:`~pseudo_stereo_ros.formats.yaml_io.read_yaml`:
+    at most 1 MiB, no aliases, nesting at most 32 deep.
+
     :param path: the file
     :return: the calibration
-    :raises CalibrationError: the file is missing, not YAML, or malformed;
-        the message names the file, the key and the reason
+    :raises CalibrationError: the file is missing, not YAML, or malformed; one line naming
+        the file, the line or the key, and the reason
     """
     source = os.fspath(path)
-    try:
-        with open(path, encoding='utf-8') as stream:
-            text = stream.read()
-    except OSError as err:
-        raise CalibrationError(f'{source}: cannot read calibration file: {err.strerror}') from err
-    try:
-        data = yaml.safe_load(text)
-        # BaseLoader keeps every scalar as written, so a numeric camera_name keeps its digits.
-        raw = yaml.load(text, Loader=yaml.BaseLoader)  # noqa: S506 - BaseLoader builds no objects
-    except yaml.YAMLError as err:
-        raise CalibrationError(f'{source}: not valid YAML: {err}') from err
-    raw_name = raw.get('camera_name') if isinstance(raw, dict) else None
-    if not isinstance(raw_name, str):
-        raw_name = None
+    data, node = read_yaml(path, error=CalibrationError)
+    raw_name = None
+    if isinstance(node, yaml.MappingNode):
+        # The scalar as written, so a numeric camera_name keeps its digits (0123, 1e5).
+        raw_name = next((value.value for key, value in node.value
+                         if isinstance(key, yaml.ScalarNode) and key.value == 'camera_name'
+                         and isinstance(value, yaml.ScalarNode) and value.tag.endswith(
+                             (':int', ':float', ':str'))), None)
     return calibration_from_dict(data, source=source, raw_name=raw_name)
 
 

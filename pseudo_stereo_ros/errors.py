@@ -59,7 +59,7 @@ class DetectorConfigError(PseudoStereoError):
 
 
 class RigError(PseudoStereoError):
-    """A set of cameras is invalid: too few, or an empty or repeated name."""
+    """A set of cameras is invalid: too few, or a repeated name or one that is not a ROS name."""
 
 
 class EncodingError(PseudoStereoError):

@@ -21,6 +21,16 @@ cameras here.  The name given by the user is the name used in the data (topic
 namespaces, CSV columns); it overrides the file's ``camera_name``.  The default
 rig is ``config/rig/<name>.yaml`` of the package (two 640x480 cameras,
 ``camera1`` and ``camera2``).  ROS-free.
+
+A camera name is a ROS namespace token everywhere (``/<name>/ball/image_point``,
+``/<name>/image_raw``, the node namespace in ``bringup``), so one rule,
+:func:`check_camera_name`, holds for the command line as for the nodes: a
+letter, then letters, digits or underscores, at most
+:data:`MAX_CAMERA_NAME_LENGTH` characters.  That is ROS 2's rule for a name
+token (rcl refuses a token that starts with a digit or holds another
+character) without a leading underscore (hidden topics) or a ``/``.  Names
+are refused, not mapped: a mapped name would differ between the user's files
+and the topics.
 """
 
 from __future__ import annotations
@@ -29,6 +39,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from itertools import combinations
 import os
 from pathlib import Path
+import re
 
 import numpy as np
 
@@ -37,10 +48,42 @@ from .camera import Camera
 from .errors import RigError
 from .geometry import fundamental_matrix
 
-__all__ = ['DEFAULT_CAMERA_NAMES', 'Rig', 'config_dir']
+__all__ = ['CAMERA_NAME_RULE', 'DEFAULT_CAMERA_NAMES', 'MAX_CAMERA_NAME_LENGTH', 'Rig',
+           'check_camera_name', 'config_dir']
 
 #: The cameras of the package's default rig (``config/rig/<name>.yaml``).
 DEFAULT_CAMERA_NAMES = ('camera1', 'camera2')
+
+#: Longest camera name: keeps ``/<namespace>/<name>/ball/image_point`` well inside ROS's limit
+#: of about 250 characters for a topic name.
+MAX_CAMERA_NAME_LENGTH = 100
+
+#: The rule, as error messages state it.
+CAMERA_NAME_RULE = (f'a letter, then letters, digits or underscores, at most '
+                    f'{MAX_CAMERA_NAME_LENGTH} characters')
+
+_CAMERA_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+
+
+def check_camera_name(name: str) -> str:
+    """
+    Return ``name`` if it is a valid camera name (a ROS name token), else raise.
+
+    :param name: the camera name
+    :return: the name
+    :raises RigError: one line naming the name, the rule and a valid name to use instead
+    """
+    if (isinstance(name, str) and len(name) <= MAX_CAMERA_NAME_LENGTH
+            and _CAMERA_NAME.fullmatch(name)):
+        return name
+    if not isinstance(name, str) or not name:
+        raise RigError(f'camera name {name!r} is not a valid ROS name: use {CAMERA_NAME_RULE}')
+    suggestion = re.sub(r'[^A-Za-z0-9_]', '_', name)
+    if not suggestion[0].isalpha():
+        suggestion = 'camera_' + suggestion.lstrip('_')
+    suggestion = suggestion[:MAX_CAMERA_NAME_LENGTH]
+    raise RigError(f'camera name {name!r} is not a valid ROS name (it is the namespace of the '
+                   f"camera's topics): use {CAMERA_NAME_RULE}, e.g. {suggestion!r}")
 
 
 def config_dir() -> Path:
@@ -76,13 +119,12 @@ class Rig(Mapping[str, Camera]):
         """
         Make a rig of calibrated cameras.
 
-        :param cameras: the cameras; their names must be unique and non-empty
+        :param cameras: the cameras; their names must be unique and valid
+            (:func:`check_camera_name`)
         :param minimum: the least number of cameras the caller needs
-        :raises RigError: too few cameras, or an empty or repeated name
+        :raises RigError: too few cameras, or an invalid or repeated name
         """
-        names = [camera.name for camera in cameras]
-        if any(not isinstance(name, str) or not name for name in names):
-            raise RigError(f'camera names must be non-empty strings, got {names}')
+        names = [check_camera_name(camera.name) for camera in cameras]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:
             raise RigError(f'camera names must be unique, got {", ".join(repeated)} twice')
@@ -99,8 +141,10 @@ class Rig(Mapping[str, Camera]):
         :param files: the pairs; the name overrides the file's ``camera_name``
         :param minimum: the least number of cameras the caller needs
         :raises CalibrationError: a file is missing or malformed (the message names it)
-        :raises RigError: too few cameras, or an empty or repeated name
+        :raises RigError: too few cameras, or an invalid or repeated name
         """
+        for name, _ in files:
+            check_camera_name(name)  # before reading files: a bad name is the first fault
         return cls([Camera.from_file(path, name=name) for name, path in files], minimum=minimum)
 
     @classmethod

@@ -26,11 +26,15 @@ near 1.7e18 ns loses ~200 ns as a float).  ROS-free: stdlib only.
 
 from typing import Dict, Tuple
 
-__all__ = ['NS_PER_S', 'ns_to_sec_nanosec', 'sec_nanosec_to_ns', 'seconds_to_ns', 'stamp_fields',
-           'stamp_ns']
+__all__ = ['BAG_STAMP_MAX_NS', 'NS_PER_S', 'ns_to_sec_nanosec', 'sec_nanosec_to_ns',
+           'seconds_to_ns', 'stamp_fields', 'stamp_ns']
 
 #: Nanoseconds per second.
 NS_PER_S = 1_000_000_000
+
+#: Latest stamp a bag message can carry [ns]: ``Time.sec`` is an int32 (2038-01-19); a bag's
+#: log time is unsigned, so the earliest is 0.
+BAG_STAMP_MAX_NS = (2 ** 31 - 1) * NS_PER_S + NS_PER_S - 1
 
 
 def seconds_to_ns(seconds: float) -> int:

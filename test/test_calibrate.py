@@ -515,3 +515,39 @@ def test_cli_missing_intrinsics_file_exits_2(tmp_path, capsys):
                    '--points', str(csv_path), '--out', str(tmp_path / 'x.yaml')])
     error = capsys.readouterr().err
     assert status == 2 and 'none.yaml' in error and error.count('\n') == 1
+
+
+# -- issue 12: `calibrate` reads CSV through the one reader `track` uses -------------------------
+
+
+@pytest.mark.parametrize('mangle, message', [
+    (lambda text: b'\n'.join(text.split(b'\n')[:2] + [b'1,2,3,4,\xe9'] + text.split(b'\n')[2:]),
+     'corr.csv:3: not a UTF-8 CSV file (byte 0xe9'),  # before: UnicodeDecodeError traceback
+    (lambda text: text + b'1,2,3,4,' + b'5' * 140_000 + b'\n',
+     'corr.csv:42: malformed CSV: field larger than field limit'),  # before: _csv.Error
+])
+def test_cli_full_bad_bytes_are_one_line(tmp_path, capsys, correspondences, mangle, message):
+    truth, world, pixels = correspondences
+    csv_path = tmp_path / 'corr.csv'
+    _write_csv(csv_path, world, pixels)
+    csv_path.write_bytes(mangle(csv_path.read_bytes()))
+    out = tmp_path / 'cam.yaml'
+    status = main(['calibrate', 'full', '--points', str(csv_path), '--image-size', '640x480',
+                   '--out', str(out)])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1, error
+    assert message in error, error
+    assert not out.exists()
+
+
+def test_cli_full_reads_a_byte_order_mark_as_track_does(tmp_path, capsys, correspondences):
+    # Before: "missing column(s) x" (the BOM stuck to the first column name).
+    truth, world, pixels = correspondences
+    plain, marked = tmp_path / 'plain.csv', tmp_path / 'marked.csv'
+    _write_csv(plain, world, pixels)
+    marked.write_bytes(b'\xef\xbb\xbf' + plain.read_bytes())
+    for path in (plain, marked):
+        assert main(['calibrate', 'full', '--points', str(path), '--image-size', '640x480',
+                     '--out', str(tmp_path / f'{path.stem}.yaml'), '--name', 'cam']) == 0
+    capsys.readouterr()
+    assert (tmp_path / 'plain.yaml').read_text() == (tmp_path / 'marked.yaml').read_text()

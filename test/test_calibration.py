@@ -148,3 +148,118 @@ def test_to_dict_is_camera_info_compatible(real_file):
                 'distortion_model', 'distortion_coefficients', 'rotation_matrix', 'translation'):
         assert key in data
     assert data['camera_matrix']['rows'] == 3 and len(data['camera_matrix']['data']) == 9
+
+
+# -- issue 12: every malformed file is one line naming the file and the reason, never a traceback
+
+
+def _real_with(old, new):
+    assert old in REAL_FILE
+    return REAL_FILE.replace(old, new, 1)
+
+
+@pytest.mark.parametrize('text, key', [
+    (_real_with('image_width: 1280', 'image_width: .nan'), 'image_width'),
+    (_real_with('image_width: 1280', 'image_width: .inf'), 'image_width'),
+    (_real_with('image_height: 1024', 'image_height: -.inf'), 'image_height'),
+    (_real_with('image_height: 1024', 'image_height: 1.0e+400'), 'image_height'),
+    (_real_with('image_width: 1280', 'image_width: 12800000000000000000000'), 'image_width'),
+    (_real_with('image_width: 1280', 'image_width: 1280.5'), 'image_width'),
+    (_real_with('{cols: 3, rows: 3, data: [1271', '{cols: .inf, rows: 3, data: [1271'),
+     'camera_matrix'),
+    (_real_with('{cols: 3, rows: 3, data: [1271', '{cols: 3.5, rows: 3, data: [1271'),
+     'camera_matrix'),
+    (_real_with('{cols: 3, rows: 3, data: [1271', '{cols: .nan, rows: 3, data: [1271'),
+     'camera_matrix'),
+    (_real_with('data: [1271.06626,', 'data: [.nan,'), 'camera_matrix'),
+    (_real_with('data: [0.7474627231917774,', 'data: [.inf,'), 'rotation_matrix'),
+    (_real_with('translation: [-1.180126044809713', 'translation: [-.inf'), 'translation'),
+    (_real_with('data: [-0.247491602', 'data: [.nan'), 'distortion_coefficients'),
+    (REAL_FILE.split('distortion_coefficients:')[0]
+     + 'distortion_coefficients: {rows: 1, cols: 5, data: 5}\n'
+     + 'distortion_model:' + REAL_FILE.split('distortion_model:')[1],
+     'distortion_coefficients'),
+    (REAL_FILE.split('distortion_coefficients:')[0] + 'distortion_coefficients: 5\n'
+     + 'distortion_model:' + REAL_FILE.split('distortion_model:')[1],
+     'distortion_coefficients'),
+    (REAL_FILE.split('distortion_coefficients:')[0]
+     + 'distortion_coefficients: {rows: 1, cols: 5, data: {a: 1}}\n'
+     + 'distortion_model:' + REAL_FILE.split('distortion_model:')[1],
+     'distortion_coefficients'),
+    (_real_with('camera_matrix: {cols: 3, rows: 3,', 'camera_matrix: {cols: [3], rows: 3,'),
+     'camera_matrix'),
+])
+def test_non_finite_and_wrongly_shaped_values_are_one_line(tmp_path, text, key):
+    # Before: ValueError/OverflowError/TypeError tracebacks from int(nan), int(inf), len(5).
+    path = tmp_path / 'cam.yaml'
+    path.write_text(text)
+    with pytest.raises(CalibrationError) as info:
+        load_calibration(path)
+    message = str(info.value)
+    assert str(path) in message and repr(key) in message and '\n' not in message, message
+
+
+def _yaml_error(tmp_path, content) -> str:
+    path = tmp_path / 'cam.yaml'
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    with pytest.raises(CalibrationError) as info:
+        load_calibration(path)
+    message = str(info.value)
+    assert message.startswith(str(path)) and '\n' not in message, message
+    return message[len(str(path)):]
+
+
+def test_deeply_nested_yaml_is_one_line(tmp_path):
+    # Before: RecursionError (a 20,000-level flow sequence) with a 1,000-frame traceback.
+    message = _yaml_error(tmp_path, 'camera_name: ' + '[' * 20000 + ']' * 20000 + '\n')
+    assert 'nested deeper than' in message
+
+
+def test_invalid_yaml_is_one_line_with_line_and_column(tmp_path):
+    # Before: PyYAML's five-line message (problem, mark, source line, caret).
+    text = _real_with('camera_name: 22276213', 'camera_name: [22276213')
+    message = _yaml_error(tmp_path, text)
+    line = text.splitlines().index('camera_name: [22276213') + 1
+    assert message.startswith(f':{line + 1}:') and 'not valid YAML' in message, message
+    assert 'flow sequence' in message
+
+
+@pytest.mark.parametrize('content, reason', [
+    (bytes(range(256)) * 4, 'not UTF-8 text'),   # before: UnicodeDecodeError traceback
+    (b'camera_name: a\x00b\n', 'not valid YAML'),  # before: PyYAML's two-line ReaderError
+    (b'a:\n\tb: 1\n', 'not valid YAML'),
+])
+def test_binary_yaml_is_one_line(tmp_path, content, reason):
+    message = _yaml_error(tmp_path, content)
+    assert reason in message, message
+    assert message.startswith(':1:') or message.startswith(':2:'), message
+
+
+def _alias_bomb(levels: int) -> str:
+    """Return a calibration whose camera_matrix expands to 9**levels numbers."""
+    lines = ['a0: &a0 [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]']
+    for i in range(1, levels):
+        lines.append(f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 9) + ']')
+    body = [line for line in REAL_FILE.splitlines() if not line.startswith('camera_matrix')
+            and not line.startswith('                0, 0, 1]')]
+    return '\n'.join(lines + [f'camera_matrix: *a{levels - 1}'] + body) + '\n'
+
+
+def test_alias_bomb_is_refused_before_it_expands(tmp_path):
+    # Before: the aliases were expanded (9**8 numbers: 37-60 s and 845 MB) before the size
+    # check. Calibration files never need aliases; the first one is refused while parsing.
+    message = _yaml_error(tmp_path, _alias_bomb(6))
+    assert ':2:' in message and 'alias' in message, message
+
+
+def test_an_oversized_file_is_refused_unread(tmp_path):
+    message = _yaml_error(tmp_path, REAL_FILE + '# padding\n' * 200_000)
+    assert 'larger than' in message, message
+
+
+def test_aliases_and_oversize_do_not_reject_real_files(real_file):
+    # The refusals above are about aliases and size, not the real rig's files (2 KB, no alias).
+    assert load_calibration(real_file).camera_name == '22276213'

@@ -130,3 +130,84 @@ def test_truth_in_any_order_and_a_mismatch_writes_nothing(tmp_path, capsys):
     assert main(args + ['--output', str(tmp_path / 'b.csv'), '--truth', str(shuffled)]) == 2
     assert 'no ground truth' in capsys.readouterr().err
     assert not (tmp_path / 'b.csv').exists()
+
+
+# -- issue 12: one line, never a traceback ------------------------------------------------------
+
+
+@pytest.mark.parametrize('command', ['check', 'track'])
+@pytest.mark.parametrize('stamp', [10 ** 30, 2 ** 63, -2 ** 63 - 1])
+def test_stamps_outside_int64_are_refused_where_they_are_read(tmp_path, capsys, command, stamp):
+    # Before: `check` died with OverflowError in numpy; `track` accepted 10^30 ns.
+    observations = tmp_path / 'obs.csv'
+    observations.write_text(GOOD + f'{stamp},camera1,300,200\n')
+    output = tmp_path / 'est.csv'
+    args = [command, *CAMERAS, '--input', str(observations)]
+    status = main(args + (['--output', str(output)] if command == 'track' else []))
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1, error
+    assert 'obs.csv:4: column stamp_ns:' in error and 'int64' in error
+    assert not output.exists()
+
+
+def test_int64_limits_are_valid_stamps(tmp_path, capsys):
+    observations = tmp_path / 'obs.csv'
+    observations.write_text(GOOD + f'{2 ** 63 - 1},camera1,300,200\n'
+                            f'{-2 ** 63},camera2,300,200\n')
+    status, output = track(tmp_path, observations.read_text())
+    assert status == 0, capsys.readouterr().err
+
+
+def test_a_bad_byte_far_into_a_file_names_its_line(tmp_path, capsys):
+    # Decoding happens in 8 KB chunks; the line named is the bad byte's, not the chunk's.
+    rows = [f'{1700000000000000000 + k * 16666667},camera{1 + k % 2},300.5,200.25\n'
+            for k in range(2000)]
+    observations = tmp_path / 'obs.csv'
+    head, tail = 'stamp_ns,camera,u,v\n' + ''.join(rows[:1500]), ''.join(rows[1500:])
+    observations.write_bytes(head.encode() + b'1700000000000000000,caf\xe9,1,2\n' + tail.encode())
+    status = main(['track', *CAMERAS, '--input', str(observations), '--output',
+                   str(tmp_path / 'e.csv')])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1
+    assert 'obs.csv:1502: not a UTF-8 CSV file (byte 0xe9' in error, error
+
+
+def test_a_field_over_the_csv_limit_is_one_line(tmp_path, capsys):
+    status, output = track(tmp_path, GOOD + '1700000000033333333,camera1,' + '1' * 200_000
+                           + ',2\n')
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1
+    assert 'obs.csv:4: malformed CSV: field larger than field limit' in error, error
+    assert not output.exists()
+
+
+@pytest.mark.parametrize('name', ['cam-1', 'cam 1', '22276213', '_cam', 'camera/1'])
+def test_camera_names_that_are_not_ros_names_are_refused(tmp_path, capsys, name):
+    # One rule for the CLI and the nodes: the name is the topic namespace of its image points.
+    observations = tmp_path / 'obs.csv'
+    observations.write_text(GOOD.replace('camera1', name))
+    status = main(['track', '--camera', f'{name}={RIG / "camera1.yaml"}', *CAMERAS[2:],
+                   '--input', str(observations), '--output', str(tmp_path / 'e.csv')])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1, error
+    assert f'{name!r} is not a valid ROS name' in error and 'a letter, then letters' in error
+
+
+@pytest.mark.parametrize('offset_ns', [-1_800_000_000_000_000_000, 600_000_000_000_000_000])
+def test_stamps_a_bag_cannot_hold_are_refused_before_writing(tmp_path, capsys, offset_ns):
+    # Valid int64 stamps before 1970 or after 2038 (Time.sec is an int32): before, the bag
+    # writer's struct.error traceback, after the CSV had been written.
+    assert main(['simulate', '--scenario', 'straight', '--out', str(tmp_path)]) == 0
+    lines = (tmp_path / 'observations.csv').read_text().splitlines()
+    shifted = tmp_path / 'shifted.csv'
+    shifted.write_text('\n'.join([lines[0]] + [
+        f'{int(line.split(",", 1)[0]) + offset_ns},{line.split(",", 1)[1]}'
+        for line in lines[1:]]) + '\n')
+    output, bag = tmp_path / 'e.csv', tmp_path / 'bag'
+    capsys.readouterr()
+    status = main(['track', *CAMERAS, '--input', str(shifted), '--output', str(output),
+                   '--output-bag', str(bag)])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count('\n') == 1, error
+    assert 'cannot write stamp' in error and 'Time.sec is an int32' in error
+    assert not output.exists() and not bag.exists()

@@ -183,9 +183,26 @@ def test_bad_params_file_stops_with_one_line(tmp_path, program, problem):
     result = subprocess.run([str(BIN / program)] + args, capture_output=True, text=True,
                             timeout=60)
     assert result.returncode in (1, 2)
-    assert 'Traceback' not in result.stderr
+    # One line: before, rcl's own "[ERROR] [rcl]: Failed to parse global arguments" came first.
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert str(path) in result.stderr and ('cannot start' in result.stderr
                                            or 'no such file' in result.stderr)
+
+
+@pytest.mark.parametrize('args, reason', [
+    (['fuser', '--ros-args', '-p', 'camera_names:=[cam-1, camera2]'],
+     "parameter camera_names: camera name 'cam-1' is not a valid ROS name"),
+    (['detector', '--ros-args', '-r', '__ns:=/22276213'], "Couldn't parse remap rule"),
+    (['fuser', '--ros-args', '-p', 'method:=[paper'], "Couldn't parse parameter override"),
+])
+def test_bad_names_and_arguments_stop_the_node_with_one_line(args, reason):
+    # Before: a 26-line InvalidTopicNameException; rcl's ERROR line before the FATAL one.
+    result = subprocess.run([str(BIN / args[0])] + args[1:], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and '[FATAL]' in lines[0] and 'cannot start' in lines[0], lines
+    assert reason in lines[0]
 
 
 def test_malformed_calibration_file_stops_the_node_naming_it(tmp_path):

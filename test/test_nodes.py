@@ -482,3 +482,78 @@ def test_bringup_reports_a_malformed_params_file_in_one_line(capfd, tmp_path):
     assert bringup.main(['--params-file', str(bad)]) == 1
     err = capfd.readouterr().err
     assert 'cannot start' in err and 'bad.yaml' in err and 'Traceback' not in err
+
+
+# -- issue 12: camera names that are not ROS names stop a node with one line --------------------
+
+
+def _rig_files():
+    from pseudo_stereo_ros.rig import config_dir
+    return [str(config_dir() / 'rig' / f'{name}.yaml') for name in ('camera1', 'camera2')]
+
+
+@pytest.mark.parametrize('name', ['cam-1', 'cam 1', '22276213'])
+def test_fuser_refuses_camera_names_that_are_not_ros_names(context, namespace, name):
+    # Before: rclpy's InvalidTopicNameException (26 lines) from create_subscription.
+    overrides = [Parameter('camera_names', value=[name, 'camera2']),
+                 Parameter('calibration_files', value=_rig_files())]
+    with pytest.raises(StartupError) as info:
+        FuserNode(namespace=namespace, context=context, parameter_overrides=overrides)
+    message = str(info.value)
+    assert message.startswith('parameter camera_names: ') and '\n' not in message
+    assert f'{name!r} is not a valid ROS name' in message
+
+
+def test_monitor_refuses_camera_names_that_are_not_ros_names(context, namespace):
+    overrides = [Parameter('camera_names', value=['camera1', 'cam-2']),
+                 Parameter('compare_naive', value=False)]
+    with pytest.raises(StartupError,
+                       match="parameter camera_names: camera name 'cam-2' is not a valid"):
+        MonitorNode(namespace=namespace, context=context, parameter_overrides=overrides)
+
+
+@pytest.mark.parametrize('cameras', [['22276213', '22276209'], ['cam 1', 'cam2']])
+def test_bringup_refuses_camera_names_that_are_not_ros_names(capsys, cameras):
+    # Before: rclpy's InvalidNamespaceException from the first virtual camera node.
+    assert bringup.main(['--cameras', *cameras, '--duration', '0.01']) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('bringup: error: --cameras: ') and err.count('\n') == 1, err
+    assert f'{cameras[0]!r} is not a valid ROS name' in err
+
+
+def test_the_camera_name_rule_is_stricter_than_rcl():
+    # Every name the core accepts is a valid namespace and image point topic for rclpy; the core
+    # refuses only what rclpy refuses, plus a leading underscore (hidden topics), a '/' (one
+    # token), names over 100 characters and '' (the root namespace for rclpy, no name here).
+    import random
+
+    from pseudo_stereo_ros.errors import RigError
+    from pseudo_stereo_ros.rig import check_camera_name
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_namespace import validate_namespace
+    from rclpy.validate_topic_name import validate_topic_name
+
+    def rcl_accepts(name):
+        try:
+            validate_namespace(f'/{name}')
+            validate_topic_name(f'{name}/ball/image_point')
+        except NameValidationException:
+            return False
+        return True
+
+    rng = random.Random(12)
+    names = [''.join(rng.choice('aZ9_-/ .é~{}0') for _ in range(rng.randrange(0, 6)))
+             for _ in range(3000)] + ['a' * 100, 'a' * 101]
+    accepted = 0
+    for name in names:
+        try:
+            check_camera_name(name)
+            ours = True
+        except RigError:
+            ours = False
+        rcl = rcl_accepts(name)
+        assert not ours or rcl, name
+        assert ours or not rcl or not name or name.startswith('_') or '/' in name \
+            or len(name) > 100, name
+        accepted += ours
+    assert accepted > 100

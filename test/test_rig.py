@@ -17,7 +17,7 @@
 import numpy as np
 from pseudo_stereo_ros.errors import CalibrationError, RigError
 from pseudo_stereo_ros.geometry import fundamental_matrix
-from pseudo_stereo_ros.rig import config_dir, Rig
+from pseudo_stereo_ros.rig import check_camera_name, config_dir, Rig
 from pseudo_stereo_ros.sim.scenarios import default_rig
 import pytest
 
@@ -55,3 +55,29 @@ def test_bad_rigs_are_refused(names, match):
 def test_missing_file_names_the_file(tmp_path):
     with pytest.raises(CalibrationError, match='nothing.yaml'):
         Rig.from_files([('a', tmp_path / 'nothing.yaml')])
+
+
+@pytest.mark.parametrize('name', ['cam-1', 'cam 1', '22276213', '_cam', 'camera/1', 'kamera_é',
+                                  'a' * 101, ''])
+def test_names_that_are_not_ros_names_are_refused(name):
+    # Before: accepted here, then a 26-line InvalidTopicNameException in the fuser node.
+    path = config_dir() / 'rig' / 'camera1.yaml'
+    with pytest.raises(RigError) as info:
+        Rig.from_files([(name, path), ('camera2', path)])
+    message = str(info.value)
+    assert repr(name) in message and '\n' not in message
+    assert 'a letter, then letters, digits or underscores' in message
+
+
+@pytest.mark.parametrize('name, suggestion', [('cam-1', 'cam_1'), ('22276213', 'camera_22276213'),
+                                              ('cam 1', 'cam_1'), ('_cam', 'camera_cam')])
+def test_the_refusal_suggests_a_valid_name(name, suggestion):
+    with pytest.raises(RigError, match=f"e.g. '{suggestion}'"):
+        check_camera_name(name)
+    check_camera_name(suggestion)
+
+
+@pytest.mark.parametrize('name', ['camera1', 'camera_1', 'Cam2', 'c', 'left_cam_22276213',
+                                  'a' * 100])
+def test_ros_names_are_accepted(name):
+    assert check_camera_name(name) == name

@@ -305,3 +305,30 @@ def test_detection_in_the_bag_path_equals_the_node_conversion():
     np.testing.assert_array_equal(messages.image_to_array(msg), pixels)
     assert BallDetector().detect(pixels, encoding) == \
         BallDetector().detect(messages.image_to_array(msg), msg.encoding)
+
+
+@pytest.mark.parametrize('unusable', ['camera2', 'both'])
+def test_a_camera_whose_every_image_is_unusable_exits_2(tmp_path, capsys, unusable):
+    # Before: exit status 0 and an empty estimates file, the reason only in a count.
+    cameras = default_rig()
+    scenario = make_scenario('spiral')
+    items = []
+    for stamp in [int(s) for s in shutter_stamps(30.0, 0.2)[1:4]]:
+        position = truth_at(scenario, np.array([stamp]))[0]
+        for camera in cameras:
+            message = image_message(stamp, camera.name,
+                                    BallRenderer(camera, texture=False).render(position))
+            if unusable == 'both' or camera.name == 'camera2':
+                message = dataclasses.replace(message, encoding='16UC1')
+            items.append((image_topic(camera.name), IMAGE_TYPE, stamp, message))
+    path = tmp_path / 'images'
+    write_messages(path, items)
+    out, out_bag = tmp_path / 'e.csv', tmp_path / 'e_bag'
+    assert main(['track', '--bag', str(path), *RIG_ARGS, '--output', str(out),
+                 '--output-bag', str(out_bag)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    first = 'camera1' if unusable == 'both' else 'camera2'
+    assert f'all 3 images of /{first}/image_raw are unusable' in err, err
+    assert "'16UC1'" in err
+    assert not out.exists() and not out_bag.exists()

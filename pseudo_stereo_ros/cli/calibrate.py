@@ -23,7 +23,6 @@ and the residual of each point, flags outliers and draws a PNG of the points
 and their reprojections.
 """
 
-import csv
 import math
 import os
 from pathlib import Path
@@ -37,7 +36,7 @@ from ..calibrate import (auto_dist_terms, calibrate_extrinsics, calibrate_full,
                          calibrate_intrinsics, CalibrationResult, DISTORTION_TERMS,
                          list_images)
 from ..calibration import load_calibration, save_calibration
-from ..formats.csv_io import CsvError
+from ..formats.csv_io import CsvError, parse_float, read_rows
 
 __all__ = ['NAME', 'HELP', 'add_arguments', 'read_correspondences', 'run', 'plot_result']
 
@@ -115,50 +114,21 @@ def read_correspondences(path) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Read a correspondence CSV with the header ``x,y,z,u,v`` (extra columns are ignored).
 
+    Read by :func:`~pseudo_stereo_ros.formats.csv_io.read_rows`, the reader of
+    ``track``; lines starting with ``#`` are comments, the header is case-insensitive.
+
     :param path: the file
     :return: world points (N, 3) [m], raw pixels (N, 2) and the (N,) line number of each row
     :raises CsvError: naming the file, the line and the reason
     """
-    source = os.fspath(path)
-    try:
-        stream = open(path, newline='', encoding='utf-8')
-    except OSError as err:
-        raise CsvError(f'{source}: cannot read: {err.strerror}') from err
     rows, lines = [], []
-    with stream:
-        reader = csv.reader(stream)
-        header = None
-        for record in reader:
-            if not record or not ''.join(record).strip() or record[0].lstrip().startswith('#'):
-                continue
-            if header is None:
-                header = [name.strip().lower() for name in record]
-                missing = [c for c in CORRESPONDENCE_COLUMNS if c not in header]
-                if missing:
-                    raise CsvError(f'{source}:{reader.line_num}: missing column(s) '
-                                   f'{", ".join(missing)} (expected header x,y,z,u,v)')
-                index = [header.index(c) for c in CORRESPONDENCE_COLUMNS]
-                continue
-            if len(record) < len(header):
-                raise CsvError(f'{source}:{reader.line_num}: expected {len(header)} values, '
-                               f'got {len(record)}')
-            values = []
-            for column, i in zip(CORRESPONDENCE_COLUMNS, index):
-                try:
-                    value = float(record[i])
-                except ValueError:
-                    raise CsvError(f'{source}:{reader.line_num}: column {column}: not a number: '
-                                   f'{record[i]!r}') from None
-                if not math.isfinite(value):
-                    raise CsvError(f'{source}:{reader.line_num}: column {column}: not finite: '
-                                   f'{record[i]!r}')
-                values.append(value)
-            rows.append(values)
-            lines.append(reader.line_num)
-    if header is None:
-        raise CsvError(f'{source}: empty file (expected header x,y,z,u,v)')
+    for source, line, row in read_rows(path, CORRESPONDENCE_COLUMNS, comments=True,
+                                       lowercase=True):
+        rows.append([parse_float(row[column], source, line, column)
+                     for column in CORRESPONDENCE_COLUMNS])
+        lines.append(line)
     if not rows:
-        raise CsvError(f'{source}: no points after the header')
+        raise CsvError(f'{os.fspath(path)}: no points after the header')
     data = np.array(rows, dtype=float)
     return data[:, :3], data[:, 3:], np.array(lines)
 

@@ -20,7 +20,8 @@ from typing import Sequence
 
 from . import UsageError
 from .. import stamps
-from ..rig import Rig
+from ..errors import RigError
+from ..rig import check_camera_name, Rig
 
 __all__ = ['add_camera_argument', 'cameras_from_args', 'check_pixel_options', 'positive',
            'seconds_to_ns']
@@ -40,7 +41,8 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
     The name given on the command line is the name used in the data (it
     overrides the file's camera_name).
 
-    :raises UsageError: malformed value, duplicate name or too few cameras
+    :raises UsageError: malformed value, a name that is not a ROS name, a duplicate name or
+        too few cameras
     :raises CalibrationError: a calibration file is missing or malformed
     """
     files = []
@@ -51,6 +53,10 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
             raise UsageError(f'--camera {value!r}: expected NAME=CALIB.yaml')
         if name in (known for known, _ in files):
             raise UsageError(f'--camera {value!r}: camera {name!r} given twice')
+        try:
+            check_camera_name(name)
+        except RigError as err:
+            raise UsageError(f'--camera {value!r}: {err}') from err
         files.append((name, path))
     if len(files) < minimum:
         raise UsageError(f'--camera: need at least {minimum} cameras, got {len(files)}')

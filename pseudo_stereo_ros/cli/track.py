@@ -30,16 +30,17 @@ import sys
 
 import cv2
 import numpy as np
-import yaml
 
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..detection import BallDetector
 from ..evaluation.table1 import score
-from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_point_topic,
-                             image_topic, read_images, read_observations as read_bag_observations,
-                             read_positions, write_estimates as write_bag_estimates)
+from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUTH_TOPIC,
+                             image_point_topic, image_topic, read_images,
+                             read_observations as read_bag_observations, read_positions,
+                             write_estimates as write_bag_estimates)
 from ..formats.csv_io import read_observations, read_truth, write_estimates
+from ..formats.yaml_io import read_yaml
 from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
 from ..records import Observation
 
@@ -95,11 +96,9 @@ def detector_parameters(path) -> dict:
     :raises UsageError: unreadable file, no detector section, unknown parameter
     """
     try:
-        with open(path, encoding='utf-8') as handle:
-            document = yaml.safe_load(handle)
-    except (OSError, yaml.YAMLError) as err:
-        raise UsageError(f'--detector-params {path}: cannot read ({err})'.splitlines()[0]) \
-            from err
+        document, _ = read_yaml(path, error=UsageError)
+    except UsageError as err:
+        raise UsageError(f'--detector-params {err}') from err
     sections = []
     if isinstance(document, dict):
         sections = [value['ros__parameters'] for key, value in document.items()
@@ -119,25 +118,31 @@ def detector_parameters(path) -> dict:
 
 
 def _detect(bag, camera: str, parameters: dict, path_for_errors: str) -> tuple:
-    """Run a detector over a camera's images; return (observations, stats Counter)."""
+    """
+    Run a detector over a camera's images.
+
+    :return: ``(observations, images, unusable, first_problem)``: the detections, the number
+        of images and of unusable ones, and why the first unusable image was (None if none)
+    """
     try:
         detector = BallDetector(**parameters)
     except (TypeError, ValueError) as err:
         raise UsageError(f'{path_for_errors}: {err}') from err
-    observations, bad = [], 0
-    for stamp_ns, encoding, pixels, _ in read_images(bag, image_topic(camera)):
-        if pixels is None:
-            bad += 1
-            continue
-        try:
-            found = detector.detect(pixels, encoding)
-        except (ValueError, cv2.error):  # as the detector node: an image dropped, counted
-            bad += 1
-            continue
-        if found is not None:
+    observations, images, unusable, first_problem = [], 0, 0, None
+    for stamp_ns, encoding, pixels, problem in read_images(bag, image_topic(camera)):
+        images += 1
+        found = None
+        if pixels is not None:
+            try:
+                found = detector.detect(pixels, encoding)
+            except (ValueError, cv2.error) as err:  # as the detector node: dropped, counted
+                problem = ' '.join(str(err).split())
+        if problem is not None:
+            unusable += 1
+            first_problem = first_problem or problem
+        elif found is not None:
             observations.append(Observation(camera, stamp_ns, found[0], found[1]))
-    detector.stats['bad_image'] = bad
-    return observations, detector.stats
+    return observations, images, unusable, first_problem
 
 
 def bag_observations(bag, camera_names, detector_params: dict) -> tuple:
@@ -149,7 +154,8 @@ def bag_observations(bag, camera_names, detector_params: dict) -> tuple:
         present) or ``/<name>/image_raw`` (the detector runs over it)
     :param detector_params: :class:`BallDetector` keyword arguments for image topics
     :return: ``(observations, notes)``: notes are lines for the user about detection
-    :raises BagError: missing topics, wrong types, a damaged bag
+    :raises BagError: missing topics, wrong types, a damaged bag, a camera whose every image
+        is unusable (an unsupported encoding, a size that does not fit the buffer)
     """
     topics = bag_topics(bag)
     point_cameras, image_cameras = [], []
@@ -165,13 +171,15 @@ def bag_observations(bag, camera_names, detector_params: dict) -> tuple:
     observations = read_bag_observations(bag, point_cameras) if point_cameras else []
     notes = []
     for name in image_cameras:
-        found, stats = _detect(bag, name, detector_params, '--detector-params')
-        if not stats['frames'] and not stats['bad_image']:
+        found, images, unusable, problem = _detect(bag, name, detector_params,
+                                                   '--detector-params')
+        if not images:
             raise BagError(f'{bag}: no messages on {image_topic(name)}')
-        images = stats['frames'] + stats['bad_image']
+        if unusable == images:
+            raise BagError(f'{bag}: camera {name}: all {images} images of {image_topic(name)} '
+                           f'are unusable, the first because: {problem}')
         notes.append(f'{name}: ball found in {len(found)} of {images} images of '
-                     f'{image_topic(name)}'
-                     + (f' ({stats["bad_image"]} unusable)' if stats['bad_image'] else ''))
+                     f'{image_topic(name)}' + (f' ({unusable} unusable)' if unusable else ''))
         observations.extend(found)
     return observations, notes
 
@@ -209,6 +217,8 @@ def run(args) -> int:
             result = score(estimates, *truth)
         except ValueError as err:
             raise UsageError(f'truth {truth_name}: {err}') from err
+    if args.output_bag is not None:  # before writing anything
+        check_bag_stamps(args.output_bag, (e.stamp_ns for e in estimates))
     targets = []
     if args.output is not None:
         write_estimates(args.output, estimates)

@@ -51,7 +51,7 @@ try:
 except ImportError:  # rosbags < 0.11 nests them in Writer
     CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
 from ..records import Estimate, Observation
-from ..stamps import stamp_fields, stamp_ns
+from ..stamps import BAG_STAMP_MAX_NS, stamp_fields, stamp_ns
 
 __all__ = [
     'BagError',
@@ -62,6 +62,7 @@ __all__ = [
     'bag_cameras',
     'bag_message_counts',
     'bag_topics',
+    'check_bag_stamps',
     'image_message',
     'image_point_topic',
     'image_topic',
@@ -408,6 +409,20 @@ def write_messages(path: PathLike, messages: Iterable[Tuple[str, str, int, objec
     return count
 
 
+def check_bag_stamps(path: PathLike, stamps: Iterable[int]) -> None:
+    """
+    Check that stamps fit a bag message (0 to :data:`~pseudo_stereo_ros.stamps.BAG_STAMP_MAX_NS`).
+
+    :param path: the bag to be written (for the message)
+    :param stamps: the stamps [ns]
+    :raises BagError: naming the first stamp that does not fit
+    """
+    for stamp in stamps:
+        if not 0 <= stamp <= BAG_STAMP_MAX_NS:
+            raise BagError(f'{path}: cannot write stamp {stamp} ns: a bag message holds 0 to '
+                           f'{BAG_STAMP_MAX_NS} ns (Time.sec is an int32, log times unsigned)')
+
+
 def write_points(path: PathLike, rows: Iterable[Tuple[str, int, str, float, float, float]], *,
                  storage: str = 'mcap') -> int:
     """
@@ -417,8 +432,10 @@ def write_points(path: PathLike, rows: Iterable[Tuple[str, int, str, float, floa
     :param rows: ``(topic, stamp_ns, frame_id, x, y, z)``, written sorted by stamp
     :param storage: ``'mcap'`` or ``'sqlite3'``
     :return: the number of messages written
+    :raises BagError: a stamp a message cannot hold (nothing is written), or a write error
     """
     rows = sorted(rows, key=lambda row: row[1])
+    check_bag_stamps(path, (row[1] for row in rows))
     return write_messages(path, ((topic, IMAGE_POINT_TYPE, int(stamp),
                                   point_message(int(stamp), frame_id, x, y, z))
                                  for topic, stamp, frame_id, x, y, z in rows), storage=storage)

@@ -19,7 +19,11 @@ The CSV files other tools script against; keep these column names.
 - estimates: ``stamp_ns,camera,x,y,z`` (world metres, in stamp order)
 - truth: ``stamp_ns,x,y,z``
 
-Stamps are integer nanoseconds and are parsed as integers, never floats.
+Stamps are integer nanoseconds and are parsed as integers, never floats,
+within the int64 range.  Every CSV of the package (these and the
+correspondences of ``pseudo_stereo calibrate``) is read by :func:`read_rows`,
+so encodings, byte-order marks and malformed lines get the same one-line
+errors everywhere.
 Files are written to a temporary name and renamed, so a failed run never
 leaves a half-written file that looks complete.
 """
@@ -29,7 +33,7 @@ import math
 import os
 from pathlib import Path
 import tempfile
-from typing import Collection, Iterable, List, Optional, Sequence
+from typing import Collection, Iterable, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -40,9 +44,14 @@ __all__ = [
     'CsvError',
     'ESTIMATE_COLUMNS',
     'OBSERVATION_COLUMNS',
+    'STAMP_MAX_NS',
+    'STAMP_MIN_NS',
     'TRUTH_COLUMNS',
+    'parse_float',
+    'parse_stamp',
     'read_estimates',
     'read_observations',
+    'read_rows',
     'read_truth',
     'write_estimates',
     'write_observations',
@@ -54,38 +63,94 @@ ESTIMATE_COLUMNS = ('stamp_ns', 'camera', 'x', 'y', 'z')
 TRUTH_COLUMNS = ('stamp_ns', 'x', 'y', 'z')
 
 
-def _rows(path, columns: Sequence[str]):
-    """Yield (line number, row dict) of a CSV file with the required columns."""
+#: The range of a stamp [ns]: a signed 64-bit integer, as numpy and the fuser keep it.
+STAMP_MIN_NS, STAMP_MAX_NS = -2 ** 63, 2 ** 63 - 1
+
+
+def _bad_byte_line(path) -> tuple:
+    """Return ``(line, byte, offset)`` of the first byte of a file that is not UTF-8."""
+    with open(path, 'rb') as stream:
+        data = stream.read()
+    try:
+        data.decode('utf-8-sig')
+    except UnicodeDecodeError as err:
+        return data.count(b'\n', 0, err.start) + 1, data[err.start], err.start
+    return None, None, None
+
+
+def read_rows(path, columns: Sequence[str], *, comments: bool = False,
+              lowercase: bool = False) -> Iterator[Tuple[str, int, dict]]:
+    """
+    Yield the rows of a CSV file with the required columns: the one CSV reader of the package.
+
+    A UTF-8 byte-order mark (spreadsheet exports) is skipped; empty lines are skipped.
+    Columns beyond the required ones are allowed.
+
+    :param path: the file
+    :param columns: the required column names
+    :param comments: skip lines whose first field starts with ``#``
+    :param lowercase: match the header's names case-insensitively
+    :return: an iterator of ``(source, line number, row dict)`` (names stripped, and lowered
+        with ``lowercase``)
+    :raises CsvError: one line naming the file, the line and the reason: unreadable, not UTF-8
+        (the line of the first bad byte), malformed CSV (a field over the csv module's
+        131,072-character limit, a stray quote), a missing column, a row with fewer values
+        than the header
+    """
     source = os.fspath(path)
     try:
-        # utf-8-sig: a byte-order mark (spreadsheet exports) is not part of the first column.
+        # utf-8-sig: a byte-order mark is not part of the first column.
         stream = open(path, newline='', encoding='utf-8-sig')
     except OSError as err:
         raise CsvError(f'{source}: cannot read: {err.strerror}') from err
+    expected = ','.join(columns)
     with stream:
-        reader = csv.DictReader(stream)
+        reader = csv.reader(stream)
         try:
-            header = [name.strip() for name in (reader.fieldnames or [])]
-            missing = [name for name in columns if name not in header]
-            if missing:
-                raise CsvError(f'{source}:1: missing column(s) {", ".join(missing)} '
-                               f'(expected header {",".join(columns)})')
-            reader.fieldnames = header
-            for row in reader:
-                yield source, reader.line_num, row
-        except (UnicodeDecodeError, csv.Error) as err:
-            raise CsvError(f'{source}:{reader.line_num + 1}: not a UTF-8 CSV file '
-                           f'({err})') from err
+            header = None
+            for record in reader:
+                if not ''.join(record).strip() or (
+                        comments and record[0].lstrip().startswith('#')):
+                    continue
+                if header is None:
+                    header = [name.strip() for name in record]
+                    if lowercase:
+                        header = [name.lower() for name in header]
+                    missing = [name for name in columns if name not in header]
+                    if missing:
+                        raise CsvError(f'{source}:{reader.line_num}: missing column(s) '
+                                       f'{", ".join(missing)} (expected header {expected})')
+                    continue
+                if len(record) < len(header):
+                    raise CsvError(f'{source}:{reader.line_num}: expected {len(header)} values '
+                                   f'({",".join(header)}), got {len(record)}')
+                yield source, reader.line_num, dict(zip(header, record))
+        except UnicodeDecodeError as err:
+            line, byte, offset = _bad_byte_line(path)
+            raise CsvError(f'{source}:{line}: not a UTF-8 CSV file (byte 0x{byte:02x} at '
+                           f'offset {offset})' if line is not None else
+                           f'{source}: not a UTF-8 CSV file ({err.reason})') from err
+        except csv.Error as err:
+            raise CsvError(f'{source}:{reader.line_num}: malformed CSV: {err}') from err
+    if header is None:
+        raise CsvError(f'{source}: missing column(s) {", ".join(columns)} (empty file; '
+                       f'expected header {expected})')
 
 
-def _int(text: str, source: str, line: int, column: str) -> int:
+def parse_stamp(text: str, source: str, line: int, column: str) -> int:
+    """Parse an integer stamp [ns] within the int64 range; raise :class:`CsvError` naming it."""
     try:
-        return int(text.strip())
+        value = int(text.strip())
     except (AttributeError, ValueError):
         raise CsvError(f'{source}:{line}: column {column}: not an integer: {text!r}') from None
+    if not STAMP_MIN_NS <= value <= STAMP_MAX_NS:
+        raise CsvError(f'{source}:{line}: column {column}: {text.strip()[:40]} is outside the '
+                       f'int64 range of a stamp [ns] ({STAMP_MIN_NS} to {STAMP_MAX_NS})')
+    return value
 
 
-def _float(text: str, source: str, line: int, column: str, *, finite: bool = True) -> float:
+def parse_float(text: str, source: str, line: int, column: str, *, finite: bool = True) -> float:
+    """Parse a number (finite unless ``finite`` is False); raise :class:`CsvError` naming it."""
     try:
         value = float(text.strip())
     except (AttributeError, ValueError):
@@ -105,7 +170,7 @@ def read_observations(path, cameras: Optional[Collection[str]] = None) -> List[O
     :raises CsvError: naming the file, line and reason
     """
     observations = []
-    for source, line, row in _rows(path, OBSERVATION_COLUMNS):
+    for source, line, row in read_rows(path, OBSERVATION_COLUMNS):
         camera = (row['camera'] or '').strip()
         if not camera:
             raise CsvError(f'{source}:{line}: column camera: empty')
@@ -113,18 +178,18 @@ def read_observations(path, cameras: Optional[Collection[str]] = None) -> List[O
             raise CsvError(f'{source}:{line}: unknown camera {camera!r} '
                            f'(configured: {", ".join(sorted(cameras))})')
         observations.append(Observation(
-            camera, _int(row['stamp_ns'], source, line, 'stamp_ns'),
-            _float(row['u'], source, line, 'u', finite=False),
-            _float(row['v'], source, line, 'v', finite=False)))
+            camera, parse_stamp(row['stamp_ns'], source, line, 'stamp_ns'),
+            parse_float(row['u'], source, line, 'u', finite=False),
+            parse_float(row['v'], source, line, 'v', finite=False)))
     return observations
 
 
 def read_estimates(path) -> List[Estimate]:
     """Read an estimates CSV (``stamp_ns,camera,x,y,z``); ``kind`` is read as ''."""
-    return [Estimate(_int(row['stamp_ns'], source, line, 'stamp_ns'), row['camera'].strip(),
-                     _float(row['x'], source, line, 'x'), _float(row['y'], source, line, 'y'),
-                     _float(row['z'], source, line, 'z'), '')
-            for source, line, row in _rows(path, ESTIMATE_COLUMNS)]
+    return [Estimate(parse_stamp(row['stamp_ns'], source, line, 'stamp_ns'),
+                     row['camera'].strip(),
+                     *(parse_float(row[c], source, line, c) for c in 'xyz'), '')
+            for source, line, row in read_rows(path, ESTIMATE_COLUMNS)]
 
 
 def read_truth(path) -> tuple:
@@ -136,11 +201,11 @@ def read_truth(path) -> tuple:
     :raises CsvError: naming the file, line and reason (also for a repeated stamp)
     """
     rows = {}
-    for source, line, row in _rows(path, TRUTH_COLUMNS):
-        stamp = _int(row['stamp_ns'], source, line, 'stamp_ns')
+    for source, line, row in read_rows(path, TRUTH_COLUMNS):
+        stamp = parse_stamp(row['stamp_ns'], source, line, 'stamp_ns')
         if stamp in rows:
             raise CsvError(f'{source}:{line}: stamp {stamp} repeated')
-        rows[stamp] = [_float(row[c], source, line, c) for c in 'xyz']
+        rows[stamp] = [parse_float(row[c], source, line, c) for c in 'xyz']
     stamps = sorted(rows)
     return (np.array(stamps, dtype=np.int64),
             np.array([rows[s] for s in stamps], dtype=float).reshape(-1, 3))

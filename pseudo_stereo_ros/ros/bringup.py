@@ -44,8 +44,9 @@ from .fuser_node import FuserNode
 from .monitor_node import MonitorNode
 from .node_tools import init_context, STARTUP_ERRORS
 from .virtual_camera_node import VirtualCameraNode
+from ..errors import RigError
 from ..fusion import METHODS
-from ..rig import config_dir
+from ..rig import check_camera_name, config_dir
 from ..sim.scenarios import SCENARIOS
 
 __all__ = ['build_parser', 'main', 'write_plot']
@@ -225,6 +226,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     options = build_parser().parse_args(argv)
     if len(options.cameras) < 2:
         print('bringup: error: --cameras needs at least two names', file=sys.stderr)
+        return 2
+    try:
+        for name in options.cameras:
+            check_camera_name(name)  # before a node takes it as its namespace
+    except RigError as err:
+        print(f'bringup: error: --cameras: {err}', file=sys.stderr)
         return 2
     params_file = options.params_file or str(config_dir() / 'bringup.yaml')
     if not os.path.isfile(params_file):

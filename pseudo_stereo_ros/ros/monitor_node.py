@@ -43,7 +43,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo
 
 from .messages import point_to_observation, point_to_xyz
-from .node_tools import declare, load_cameras, run_node
+from .node_tools import check_camera_names, declare, load_cameras, run_node
 from ..fusion import Fuser
 from ..reorder import ReorderBuffer
 
@@ -93,7 +93,7 @@ class MonitorNode(Node):
                                    'entries kept per store (estimates of each method, ground '
                                    'truth, each latency series); the oldest go first',
                                    min_value=1, read_only=True)
-        self.names = list(names or [])
+        self.names = check_camera_names(names, minimum=0)
         files = [] if files in ([''], None) else files
         self.naive = None
         if compare:

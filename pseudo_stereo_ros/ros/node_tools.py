@@ -17,12 +17,15 @@ Shared glue of the package's nodes: parameter declaration and the Jazzy ``main()
 
 A node's ``__init__`` raises :class:`StartupError` (or a
 :class:`~pseudo_stereo_ros.calibration.CalibrationError`, or rclpy's
-parameter exceptions) for a bad parameter or file; :func:`run_node` logs
-the message, which names the parameter, and returns exit status 1.  A
-params file rcl cannot read or parse (``--ros-args --params-file F``) is
-reported the same way by :func:`init_context`.
+parameter exceptions, or rclpy's name validation) for a bad parameter or
+file; :func:`run_node` logs the message, which names the parameter, as one
+FATAL line and returns exit status 1.  A params file that is missing or that
+rcl cannot parse (``--ros-args --params-file F``), or another bad ROS
+argument, is reported the same way by :func:`init_context`, before
+``rclpy.init`` and without rcl's own error line.
 """
 
+import os
 import re
 import sys
 from typing import Callable, List, Optional, Sequence
@@ -30,27 +33,32 @@ from typing import Callable, List, Optional, Sequence
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterException, ParameterUninitializedException)
+                              NameValidationException, ParameterException,
+                              ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+import rclpy.logging
 from rclpy.node import Node
+import rclpy.utilities
 
 from ..camera import Camera
 from ..errors import CalibrationError, RigError, StartupError
-from ..rig import config_dir, Rig
+from ..rig import check_camera_name, config_dir, Rig
 
 __all__ = [
     'StartupError',
+    'check_camera_names',
     'declare',
     'init_context',
     'load_cameras',
     'logger_name',
+    'one_line',
     'run_node',
 ]
 
 #: Exceptions that mean "bad configuration": the node stops at start-up with the message.
 STARTUP_ERRORS = (CalibrationError, InvalidParameterTypeException,
-                  InvalidParameterValueException, ParameterException,
+                  InvalidParameterValueException, NameValidationException, ParameterException,
                   ParameterUninitializedException, ValueError, FileNotFoundError)
 
 
@@ -89,11 +97,33 @@ def declare(node: Node, name: str, default, description: str, *,
     return value
 
 
+def check_camera_names(camera_names: Sequence[str], *, minimum: int = 2) -> List[str]:
+    """
+    Check the ``camera_names`` parameter: enough names, each a ROS name token, none repeated.
+
+    :param camera_names: the parameter's value
+    :param minimum: the least number of names
+    :return: the names
+    :raises StartupError: ``parameter camera_names: ...`` with the rule
+        (:func:`~pseudo_stereo_ros.rig.check_camera_name`)
+    """
+    names = list(camera_names or [])
+    if len(names) < minimum:
+        raise StartupError(f'parameter camera_names: need at least {minimum} camera names, '
+                           f'got {names}')
+    try:
+        for name in names:
+            check_camera_name(name)
+    except RigError as err:
+        raise StartupError(f'parameter camera_names: {err}') from err
+    return names
+
+
 def load_cameras(camera_names: Sequence[str], calibration_files: Sequence[str]) -> List[Camera]:
     """
     Load the cameras named by the ``camera_names`` and ``calibration_files`` parameters.
 
-    :param camera_names: at least two unique names
+    :param camera_names: at least two unique names, each a ROS name token
     :param calibration_files: one file per name (same order), or empty for the default rig's
         ``config/rig/<name>.yaml``
     :return: the cameras
@@ -101,10 +131,7 @@ def load_cameras(camera_names: Sequence[str], calibration_files: Sequence[str]) 
         calibration file also the entry, and the file and key (from the
         :class:`~pseudo_stereo_ros.calibration.CalibrationError`)
     """
-    names = list(camera_names or [])
-    if len(names) < 2 or any(not isinstance(n, str) or not n for n in names):
-        raise StartupError(f'parameter camera_names: need at least two non-empty camera names, '
-                           f'got {names}')
+    names = check_camera_names(camera_names)
     files = list(calibration_files or []) or [
         str(config_dir() / 'rig' / f'{name}.yaml') for name in names]
     if len(files) != len(names):
@@ -156,21 +183,68 @@ def _default_node_name(node_factory: Callable[..., Node]) -> str:
     return re.sub(r'(?<!^)(?=[A-Z])', '_', class_name).lower()
 
 
+def one_line(text: str) -> str:
+    """
+    Return an error message as one line.
+
+    rcl appends ``, at <source file>:<line>`` frames; rclpy's name validation adds the name
+    and a caret on lines of their own.  Both are noise in a start-up error.
+    """
+    text = re.sub(r', at \S+:\d+', '', str(text))
+    lines = [line.strip() for line in text.splitlines() if line.strip().strip('^')]
+    return ' '.join(lines)
+
+
+def _ros_arguments_error(args: Optional[List[str]]) -> Optional[str]:
+    """
+    Parse the ROS arguments as ``rclpy.init`` will, quietly; return why they are bad, or None.
+
+    rcl logs its own ``Failed to parse global arguments`` line before rclpy raises, and a
+    missing params file is only ``Error opening YAML file``: parsing once with rcl's logger
+    silenced leaves one line, ours.
+    """
+    argv = list(sys.argv if args is None else args)
+    ros = False
+    for flag, value in zip(argv, argv[1:]):
+        if flag == '--ros-args':
+            ros = True
+        elif flag == '--':
+            ros = False
+        elif ros and flag == '--params-file' and not os.path.isfile(value):
+            return f'--params-file {value}: no such file'
+        elif ros and flag == '--params-file' and not os.access(value, os.R_OK):
+            return f'--params-file {value}: not readable'
+    rcl_logger = rclpy.logging.get_logger('rcl')
+    rcl_logger.set_level(rclpy.logging.LoggingSeverity.FATAL)
+    try:
+        rclpy.utilities.remove_ros_args(argv)
+    except _rclpy.RCLError as err:
+        return one_line(err)
+    except _rclpy.UnknownROSArgsError as err:
+        return f'unknown ROS argument(s): {one_line(err)}'
+    finally:
+        rcl_logger.set_level(rclpy.logging.LoggingSeverity.UNSET)
+    return None
+
+
 def init_context(args: Optional[List[str]] = None, *, context=None,
                  name: str = 'node') -> bool:
     """
-    Run ``rclpy.init``; on failure (a params file rcl cannot read or parse) log one line.
+    Run ``rclpy.init``; on failure (a missing or bad params file or argument) log one line.
 
     :param args: command-line arguments (``--ros-args ...``); None for ``sys.argv``
     :param context: the context to initialize; None for the default one
     :param name: the logger name for the message (see :func:`logger_name`)
-    :return: True when initialized; False after logging ``cannot start: <reason>``
+    :return: True when initialized; False after logging ``cannot start: <reason>``, the only
+        line (rcl's own error line is silenced)
     """
-    try:
-        rclpy.init(args=args, context=context)
-    except _rclpy.RCLError as err:
-        # rcl appends ', at <source file>:<line>' frames: noise for a user.
-        reason = re.sub(r', at \S+:\d+', '', str(err)).strip()
+    reason = _ros_arguments_error(args)
+    if reason is None:
+        try:
+            rclpy.init(args=args, context=context)
+        except _rclpy.RCLError as err:
+            reason = one_line(err)
+    if reason is not None:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {reason}')
         return False
     return True
@@ -194,7 +268,7 @@ def run_node(node_factory: Callable[..., Node], args: Optional[List[str]] = None
         try:
             node = node_factory()
         except STARTUP_ERRORS as err:
-            rclpy.logging.get_logger(name).fatal(f'cannot start: {err}')
+            rclpy.logging.get_logger(name).fatal(f'cannot start: {one_line(err)}')
             return 1
         try:
             rclpy.spin(node)
