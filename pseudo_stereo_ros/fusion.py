@@ -296,7 +296,9 @@ class Fuser:
         if not (math.isfinite(point[0]) and math.isfinite(point[1]) and math.isfinite(point[2])):
             stats['degenerate'] += 1
             return None
-        if not self.plausibility.accept(stamp, point):
+        plausibility = self.plausibility
+        plausibility.window_ns = self.gate.rig_gap_ns  # "recent": a few frame periods
+        if not plausibility.accept(stamp, point):
             return None
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
@@ -334,11 +336,11 @@ class Fuser:
     def _partner(self, view: _View, stamp: int) -> Optional[_View]:
         """Return the other camera that fired most recently within its max gap, if any."""
         best = None
-        gap = self.gate.max_gap_for
+        gaps = self.gate.max_gaps
         for other in self._views.values():
             if other is view or not other.frames:
                 continue
-            if stamp - other.frames[-1].stamp > gap(other.name):
+            if stamp - other.frames[-1].stamp > gaps[other.name]:
                 continue
             if best is None or other.frames[-1].stamp > best.frames[-1].stamp:
                 best = other
@@ -366,7 +368,8 @@ class Fuser:
         # exists, more than the baseline floor apart (normally B's t'-1 and A's t-1): Eq. 3
         # never divides by a shorter baseline, whatever the phase or a double trigger.
         floor = gate.baseline_floor_ns
-        oldest = frame.stamp - max(gate.max_gap_for(view.name), gate.max_gap_for(partner.name))
+        gaps = gate.max_gaps
+        oldest = frame.stamp - max(gaps[view.name], gaps[partner.name])
         own, theirs = view.frames, partner.frames
         i, j = len(own) - 2, len(theirs) - 1
         anchors = []

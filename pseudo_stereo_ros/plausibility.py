@@ -28,13 +28,16 @@ never returned) when
 
 Recovery, so that a first wrong estimate cannot lock out the correct ones
 after it: the speed test compares only with an accepted estimate at most
-``window_ns`` old (the fuser's max gap; after a longer gap the next estimate
-re-seeds the gate), and a rejected estimate that the next estimate agrees
-with (within the same speed bound) shows that the accepted one was the
-wrong one: the next estimate is accepted and re-seeds the gate.  So one
-gross estimate costs itself, a wrong seed costs at most one correct
-estimate, and two consecutive wrong estimates that agree with each other
-pass (the gate bounds jumps; it cannot know the truth).
+``window_ns`` old (the fuser sets it to the rig's max gap, a few frame
+periods); after a longer gap the next estimate re-seeds the gate.  And a run
+of consecutive rejected estimates that agree with each other (each within
+the speed bound of the one before) replaces the accepted one: two against
+an uncorroborated seed (no estimate agreed with it yet), three against an
+estimate that continued a track (a bad detection spoils the two or three
+events that extrapolate from it, and those may well agree with each
+other; a ball that really is elsewhere, as when the detector switches to
+the next ball, goes on agreeing).  So one gross estimate costs itself, a
+wrong seed costs at most one correct estimate, and a real jump two.
 
 This module is ROS-free.
 """
@@ -52,6 +55,9 @@ __all__ = ['DEFAULT_MAX_SPEED_MPS', 'MIN_SPEED_INTERVAL_NS', 'PlausibilityGate']
 DEFAULT_MAX_SPEED_MPS = 60.0
 #: The speed bound never allows less than the motion in this time [ns].
 MIN_SPEED_INTERVAL_NS = 5_000_000
+# Consecutive mutually consistent estimates that replace an uncorroborated seed / a track.
+_RUN_AGAINST_SEED = 2
+_RUN_AGAINST_TRACK = 3
 
 
 def _bound(name: str, values, default: float) -> tuple:
@@ -76,6 +82,7 @@ class PlausibilityGate:
     :param workspace_min_m: lower corner (x, y, z) of the workspace box [m]; None: unbounded
     :param workspace_max_m: upper corner (x, y, z) [m]; None: unbounded
     :param window_ns: the speed test compares with accepted estimates at most this old [ns]
+        (an attribute: the fuser keeps it at the input gate's rig gap)
     :param stats: the counter to count ``implausible`` into; a new one if None
     :raises FuserConfigError: an invalid option, naming it
     """
@@ -102,13 +109,15 @@ class PlausibilityGate:
         self._box = any(math.isfinite(v) for v in self.workspace_min_m + self.workspace_max_m)
         self.window_ns = int(window_ns)
         self.stats = Counter() if stats is None else stats
-        self._accepted = None  # (stamp, point) of the last accepted estimate
-        self._rejected = None  # (stamp, point) of the last estimate rejected by the speed test
+        self._accepted = None  # (stamp, point, corroborated) of the last accepted estimate
+        # (stamp, point) of the last consecutive estimates rejected by the speed test that agree
+        # with each other
+        self._rejected = []
 
     def reset(self) -> None:
         """Forget the accepted and rejected estimates (a new session)."""
         self._accepted = None
-        self._rejected = None
+        self._rejected = []
 
     def accept(self, stamp_ns: int, point: Sequence[float]) -> bool:
         """
@@ -126,26 +135,37 @@ class PlausibilityGate:
                 return False
         if self._speed is None:
             return True
-        if self._accepted is None or not self._near(self._accepted, stamp_ns, point,
-                                                    self.window_ns):
-            if self._accepted is not None and abs(stamp_ns - self._accepted[0]) <= self.window_ns:
-                # Too far from the recent accepted estimate: accept only when the previous
-                # rejected one agrees with it (then the accepted one was the wrong one).
-                rejected = self._rejected
-                self._rejected = (stamp_ns, point)
-                if rejected is None or not self._near(rejected, stamp_ns, point,
-                                                      self.window_ns):
-                    self.stats['implausible'] += 1
-                    return False
-        self._accepted = (stamp_ns, point)
-        self._rejected = None
-        return True
+        accepted = self._accepted
+        if accepted is None or abs(stamp_ns - accepted[0]) > self.window_ns:
+            self._accepted = (stamp_ns, point, False)  # a seed, not yet corroborated
+            self._rejected.clear()
+            return True
+        # The common case, inline: within the speed bound of the accepted estimate.
+        reach = self._speed * max(abs(stamp_ns - accepted[0]), MIN_SPEED_INTERVAL_NS)
+        other = accepted[1]
+        dx, dy, dz = point[0] - other[0], point[1] - other[1], point[2] - other[2]
+        if dx * dx + dy * dy + dz * dz <= reach * reach:
+            self._accepted = (stamp_ns, point, True)
+            if self._rejected:
+                self._rejected.clear()
+            return True
+        rejected = self._rejected
+        if rejected and not self._near(rejected[-1], stamp_ns, point):
+            rejected.clear()  # not a consistent run: start a new one
+        rejected.append((stamp_ns, point))
+        if len(rejected) >= (_RUN_AGAINST_TRACK if accepted[2] else _RUN_AGAINST_SEED):
+            # A run of consecutive estimates that agree with each other but not with the
+            # accepted one: the ball is there (another ball, or the seed was wrong).
+            self._accepted = (stamp_ns, point, True)
+            rejected.clear()
+            return True
+        self.stats['implausible'] += 1
+        return False
 
-    def _near(self, reference: tuple, stamp_ns: int, point: Sequence[float],
-              window_ns: int) -> bool:
+    def _near(self, reference: tuple, stamp_ns: int, point: Sequence[float]) -> bool:
         """Return True when point is within the speed bound of a recent reference."""
         dt = abs(stamp_ns - reference[0])
-        if dt > window_ns:
+        if dt > self.window_ns:
             return False
         reach = self._speed * max(dt, MIN_SPEED_INTERVAL_NS)
         other = reference[1]

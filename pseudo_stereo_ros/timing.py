@@ -31,7 +31,8 @@ for a float); ``outside_image`` (farther outside the image than
 the camera's previous one).
 
 Frame period: each camera's period is the lower quartile of its last 16
-intervals between admitted frames, counting only intervals from
+intervals between admitted frames (at each of the first four intervals, then
+at every fourth), counting only intervals from
 :data:`MIN_FRAME_INTERVAL_NS` (0.1 ms: two frames closer than that are one
 instant delivered twice, never a frame rate) up to ``max_gap_ns``.  A double
 trigger is one short interval among many and never sets the period (it can
@@ -77,6 +78,21 @@ Each camera's own history: an admitted frame more than the camera's max gap
 after its previous one comes ``fresh`` (the estimator drops that camera's
 older frames; counted in ``resets``).  A frame older than the newest admitted
 frame of another camera comes ``late`` (a slower detector).
+
+Use from an estimator (as :class:`~pseudo_stereo_ros.fusion.Fuser` does)::
+
+    gate = InputGate(cameras, sync_tolerance_ns=..., max_gap_ns=..., stats=my_counter)
+    admission = gate.admit(observation)          # at the top of every update
+    if admission.new_session:
+        forget_all_history()
+    for item in admission.ready:                 # usually one; several opening a session
+        if item.fresh:
+            forget_history_of(item.observation.camera)
+        fuse(item.observation.stamp_ns, item.x, item.y, late=item.late)
+    # while fusing: partners' data at most gate.max_gaps[name] old; pairs within
+    # gate.sync_tolerance_ns are one instant; never extrapolate over a baseline
+    # <= gate.baseline_floor_ns; then PlausibilityGate.accept() before returning.
+    gate.flush()                                 # at the end of a recording
 
 This module is ROS-free; its clock is the stamps only.
 """
@@ -234,7 +250,10 @@ class InputGate:
         self.session = 0
         self._intervals = {name: deque(maxlen=_PERIOD_WINDOW) for name in self._cameras}
         self._period: Dict[str, Optional[int]] = dict.fromkeys(self._cameras)
-        self._gap: Dict[str, int] = dict.fromkeys(self._cameras, self.max_gap_ns)
+        self._since_estimate = dict.fromkeys(self._cameras, 0)
+        #: Camera name -> its max gap [ns] (read-only for estimators; see :meth:`max_gap_for`).
+        self.max_gaps: Dict[str, int] = dict.fromkeys(self._cameras, self.max_gap_ns)
+        self._gap = self.max_gaps
         self._tolerance = self.max_sync_tolerance_ns
         self._floor = max(self._tolerance, MIN_FRAME_INTERVAL_NS)
         self._rig_gap = self.max_gap_ns
@@ -313,14 +332,17 @@ class InputGate:
         if bounds is None:
             stats['unknown_camera'] += 1
             return _NOTHING
-        if isinstance(stamp, (bool, np.bool_)):
-            stats['bad_stamp'] += 1
-            return _NOTHING
-        try:
-            stamp = operator.index(stamp)  # ints and numpy integers; floats would lose ns
-        except TypeError:
-            stats['bad_stamp'] += 1
-            return _NOTHING
+        converted = False
+        if type(stamp) is not int:  # the common case is fast; bools are not int here
+            if isinstance(stamp, (bool, np.bool_)):
+                stats['bad_stamp'] += 1
+                return _NOTHING
+            try:
+                stamp = operator.index(stamp)  # numpy integers; floats would lose ns
+            except TypeError:
+                stats['bad_stamp'] += 1
+                return _NOTHING
+            converted = True
         if not _INT64[0] <= stamp < _INT64[1]:
             stats['bad_stamp'] += 1
             return _NOTHING
@@ -329,6 +351,7 @@ class InputGate:
             if reason is not None:
                 stats[reason] += 1
                 return _NOTHING
+            converted = True
         elif not (math.isfinite(u) and math.isfinite(v)):
             stats['non_finite'] += 1
             return _NOTHING
@@ -339,7 +362,9 @@ class InputGate:
         if not (math.isfinite(x) and math.isfinite(y)):
             stats['undistort_failed'] += 1
             return _NOTHING
-        item = (Observation(camera, stamp, u, v), x, y)
+        if converted or type(observation) is not Observation:
+            observation = Observation(camera, stamp, u, v)
+        item = (observation, x, y)
 
         newest = self._newest
         if self._held:
@@ -370,6 +395,7 @@ class InputGate:
             intervals.clear()
         for name in self._period:
             self._period[name] = None
+            self._since_estimate[name] = 0
         self._derive()
 
     # -- internals ------------------------------------------------------------------------------
@@ -386,7 +412,10 @@ class InputGate:
             return _NOTHING if admitted is None else Admission(False, (admitted,))
         if camera != held_camera and abs(stamp - held_stamp) <= self._rig_gap:
             return self._new_session(held + [item])
-        if camera == held_camera and 0 < stamp - held_stamp <= self._gap[camera]:
+        if camera == held_camera and abs(stamp - held_stamp) <= self._gap[camera]:
+            if stamp <= held_stamp:  # the held camera repeating itself
+                self.stats['duplicate' if stamp == held_stamp else 'out_of_order'] += 1
+                return _NOTHING
             held.append(item)
             if len(held) >= _CONFIRM_FRAMES:
                 return self._new_session(list(held))
@@ -435,8 +464,15 @@ class InputGate:
     def _add_interval(self, camera: str, interval: int) -> None:
         intervals = self._intervals[camera]
         intervals.append(interval)
-        period = sorted(intervals)[len(intervals) // 4]
-        if period != self._period[camera]:
+        count = len(intervals)
+        if count > 4 and self._since_estimate[camera] < 3:
+            self._since_estimate[camera] += 1  # re-estimated every fourth interval: cheaper
+            return
+        self._since_estimate[camera] = 0
+        period = sorted(intervals)[count // 4]
+        old = self._period[camera]
+        # Jitter moves the quartile by a few us at every frame: re-derive on changes over 1%.
+        if old is None or abs(period - old) * 100 > old:
             self._period[camera] = period
             self._derive()
 

@@ -151,21 +151,27 @@ def case_garbage_pixels():
     errors = _errors(estimates, scenario)
     print(f'E  (-1e6, 1e6) px every 97th observation: {int(np.sum(errors > 1.0))} of '
           f'{len(errors)} estimates over 1 m off, worst {errors.max():.3g} m')
-    rng = np.random.default_rng(5)
-    fuser = Fuser(cameras)
-    far, outputs = 0, 0
-    stamp = DEFAULT_EPOCH_NS
-    for _ in range(52_000):
-        stamp += int(rng.integers(1_000_000, 20_000_000))
-        scale = 10.0 ** rng.integers(2, 7)
-        u, v = (float(x) for x in rng.uniform(-scale, scale, 2))
-        estimate = fuser.update(Observation(str(rng.choice(['camera1', 'camera2'])),
-                                            stamp, u, v))
-        if estimate is not None:
-            outputs += 1
-            far += math.dist((estimate.x, estimate.y, estimate.z), (1.5, 1.0, 1.0)) > 100.0
-    print(f'E  52,000 garbage pixels (|u|, |v| up to 1e2-1e6): {far} of {outputs} outputs '
-          f'over 100 m from the volume')
+    box = {'workspace_min_m': (-1.0, -1.0, -1.0), 'workspace_max_m': (4.0, 3.0, 3.0)}
+    for label, options in (('', {}), (', with a workspace box', box)):
+        try:
+            fuser = Fuser(cameras, **options)
+        except TypeError:  # a fuser without the option
+            print(f'E  52,000 garbage pixels{label}: no such option')
+            continue
+        rng = np.random.default_rng(5)
+        far, outputs = 0, 0
+        stamp = DEFAULT_EPOCH_NS
+        for _ in range(52_000):
+            stamp += int(rng.integers(1_000_000, 20_000_000))
+            scale = 10.0 ** rng.integers(2, 7)
+            u, v = (float(x) for x in rng.uniform(-scale, scale, 2))
+            estimate = fuser.update(Observation(str(rng.choice(['camera1', 'camera2'])),
+                                                stamp, u, v))
+            if estimate is not None:
+                outputs += 1
+                far += math.dist((estimate.x, estimate.y, estimate.z), (1.5, 1.0, 1.0)) > 100.0
+        print(f'E  52,000 garbage pixels (|u|, |v| up to 1e2-1e6){label}: {far} of {outputs} '
+              f'outputs over 100 m from the volume')
 
 
 def case_api_misuse():
