@@ -37,38 +37,50 @@ Anchor points are cached on their frames: each event triangulates once.
 ``naive`` is the paper's "unsynchronized" baseline: the newest point with the
 partner's latest point, as if simultaneous.
 
-Observations of two cameras within ``sync_tolerance_ns`` are simultaneous
-and are triangulated directly (the paper's Section 4.4 fallback).  The
-tolerance never exceeds a quarter of the camera's frame period (its shortest
-interval between frames seen so far), so the 1 ms default stays a small
-fraction of a frame up to 250 fps and shrinks beyond.  With synchronized
-cameras the first observation of a pair gives the method's prediction and the
-second the direct stereo point at the same stamp, which supersedes it
-(:meth:`Fuser.process` keeps only the latter).
+Every observation first passes the shared input and timing rules of
+:class:`~pseudo_stereo_ros.timing.InputGate` (validation, frame periods, max
+gaps, sessions; see :mod:`pseudo_stereo_ros.timing`), and every estimate the
+physical plausibility gate of :mod:`pseudo_stereo_ros.plausibility`
+(``max_speed_mps``, the optional workspace box).  Observations of two cameras
+within the gate's sync tolerance (1 ms, never more than a quarter of the
+frame period) are simultaneous and are triangulated directly (the paper's
+Section 4.4 fallback).  With synchronized cameras the first observation of a
+pair gives the method's prediction and the second the direct stereo point at
+the same stamp, which supersedes it (:meth:`Fuser.process` keeps only the
+latter).  Eq. 3 never extrapolates from two anchors closer than the gate's
+baseline floor (at least the tolerance): nearer ones count as one instant
+and an older anchor is taken instead, so the extrapolation gain stays
+bounded whatever the phase, the tolerance or a double trigger.
 
-Imperfect input: interpolation spans at most ``max_gap_ns``; data older than
-that is never used (a silent camera produces no estimates, and a camera or the
-whole rig coming back after a pause starts a fresh history, as does a jump of
-the stamps back in time by more than ``max_gap_ns``, e.g. a replay looping);
-duplicate and out-of-order stamps of one camera and non-finite pixels are
-dropped and counted in :attr:`Fuser.stats`.  An observation that arrives
-after a later one of another camera (detectors of unequal latency) is not
-lost: the partner's frames on both sides of it give Steps I-III at its own
-time (kind ``'interpolated'``, counted as ``late``).  An estimate is never NaN or infinite.
+Imperfect input: interpolation spans at most the camera's max gap (a few
+measured frame periods, ``max_gap_ns`` at most); data older than that is
+never used (a silent camera produces no estimates, and a camera or the whole
+rig coming back after a pause starts a fresh history).  An observation that
+arrives after a later one of another camera (detectors of unequal latency)
+is not lost: the partner's frames on both sides of it give Steps I-III at
+its own time (kind ``'interpolated'``, counted as ``late``).  Every
+observation gives an estimate or exactly one drop reason of
+:data:`DROP_REASONS` in :attr:`Fuser.stats`, and an estimate is never NaN or
+infinite.
 """
 
 from collections import Counter
 import math
-import operator
+import numbers
 from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .camera import Camera
 from .errors import FuserConfigError
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
+from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
+from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS,
+                     DEFAULT_SYNC_TOLERANCE_NS, INPUT_DROP_REASONS, InputGate)
 
 __all__ = [
+    'DEFAULT_IMAGE_MARGIN',
     'DEFAULT_MAX_GAP_NS',
+    'DEFAULT_MAX_SPEED_MPS',
     'DEFAULT_SYNC_TOLERANCE_NS',
     'DROP_REASONS',
     'Fuser',
@@ -79,28 +91,19 @@ __all__ = [
 
 METHODS = ('paper', 'naive')
 
-#: Default for treating two cameras' observations as simultaneous: 1 ms, 3% of a 30 fps period.
-DEFAULT_SYNC_TOLERANCE_NS = 1_000_000
-#: Default longest gap bridged by interpolation or used as history: 0.1 s (3 periods at 30 fps).
-DEFAULT_MAX_GAP_NS = 100_000_000
-
-#: Why an observation gave no estimate (keys of :attr:`Fuser.stats`).
+#: Why an observation gave no estimate (keys of :attr:`Fuser.stats`): the input gate's
+#: reasons, then the method's.
 DROP_REASONS = {
-    'unknown_camera': 'the camera name is not one of the configured cameras',
-    'bad_stamp': 'the stamp is not an integer number of nanoseconds',
-    'non_finite': 'u or v is NaN or infinite',
-    'duplicate': 'same stamp as the previous observation of that camera',
-    'out_of_order': 'stamp older than the previous observation of that camera',
-    'undistort_failed': 'the pixel could not be undistorted (far outside the lens model)',
-    'no_partner': 'no other camera has an observation within max_gap',
+    **INPUT_DROP_REASONS,
+    'no_partner': 'no other camera has an observation within its max gap',
     'warming_up': 'not enough recent history yet for the method',
     'degenerate': 'parallel rays, a point behind a camera, or a non-finite result',
+    'implausible': 'the estimate moved faster than max_speed_mps from the previous one, or '
+                   'lies outside the workspace box',
 }
 
 # Frames kept per camera; the method needs three, the rest absorbs short bursts of one camera.
 _HISTORY = 8
-# The sync tolerance never exceeds this fraction of the camera's frame period.
-_SYNC_PERIOD_FRACTION = 0.25
 
 
 class _Frame:
@@ -119,7 +122,7 @@ class _Frame:
 class _View:
     """Per-camera state: the camera, its inverse intrinsics and its recent frames."""
 
-    __slots__ = ('camera', 'name', 'center', 'k', 'frames', 'fundamental', 'period')
+    __slots__ = ('camera', 'name', 'center', 'k', 'frames', 'fundamental')
 
     def __init__(self, camera: Camera):
         self.camera = camera
@@ -131,8 +134,6 @@ class _View:
         self.frames: List[_Frame] = []
         # partner name -> F rows (plain floats) mapping this camera's ideal pixels to lines
         self.fundamental = {}
-        #: Shortest interval between two of its frames seen so far [ns] (None: not yet).
-        self.period = None
 
     def ideal_to_direction(self, iu: float, iv: float) -> tuple:
         fx, skew, cx, fy, cy = self.k
@@ -147,15 +148,26 @@ class Fuser:
     :param cameras: the calibrated cameras (a sequence, or a mapping name -> camera)
     :param method: ``'paper'`` or ``'naive'``
     :param sync_tolerance_ns: observations of two cameras closer than this are simultaneous
-        [ns] (default 1 ms; never more than a quarter of the frame period)
-    :param max_gap_ns: longest interval bridged by interpolation; older data is not used [ns]
-        (default 0.1 s)
+        [ns] (default 1 ms; never more than a quarter of the measured frame period)
+    :param max_gap_ns: upper bound of the longest interval bridged by interpolation; older
+        data is not used [ns] (default 0.1 s; each camera uses at most 4.5 of its measured
+        frame periods)
+    :param image_margin: observations farther outside the image than this fraction of its
+        width or height are dropped (default 0.1; ``math.inf``: no check)
+    :param max_speed_mps: estimates implying a faster motion are dropped [m/s]
+        (default 60; None or 0: no speed test)
+    :param workspace_min_m: lower corner (x, y, z) of the workspace [m]; estimates outside
+        are dropped (default None: unbounded; infinite entries are no bound)
+    :param workspace_max_m: upper corner (x, y, z) of the workspace [m]
     :raises FuserConfigError: an invalid option, naming it
     """
 
     def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
                  method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
-                 max_gap_ns: Optional[int] = None):
+                 max_gap_ns: Optional[int] = None, image_margin: Optional[float] = None,
+                 max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Optional[Sequence[float]] = None,
+                 workspace_max_m: Optional[Sequence[float]] = None):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -166,16 +178,23 @@ class Fuser:
             raise FuserConfigError(f'camera names must be unique, got {names}')
         if method not in METHODS:
             raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+        #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
+        #: reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
+        #: ``gate.held`` at all times.
+        self.stats = Counter()
+        #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
+        self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
+                              max_gap_ns=max_gap_ns, image_margin=image_margin,
+                              stats=self.stats)
+        #: The plausibility gate of the estimates.
+        self.plausibility = PlausibilityGate(max_speed_mps=max_speed_mps,
+                                             workspace_min_m=workspace_min_m,
+                                             workspace_max_m=workspace_max_m,
+                                             window_ns=self.gate.max_gap_ns, stats=self.stats)
         #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
-        self.max_sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
-                                         else sync_tolerance_ns)
-        self.sync_tolerance_ns = self.max_sync_tolerance_ns
-        self.max_gap_ns = int(DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns)
-        if self.sync_tolerance_ns < 0:
-            raise FuserConfigError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
-        if self.max_gap_ns <= self.sync_tolerance_ns:
-            raise FuserConfigError(f'max_gap_ns ({self.max_gap_ns}) must exceed '
-                                   f'sync_tolerance_ns ({self.sync_tolerance_ns})')
+        self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
+        #: The configured upper bound of the max gap [ns].
+        self.max_gap_ns = self.gate.max_gap_ns
         self.method = method
         self._views = {camera.name: _View(camera) for camera in cameras}
         for view in self._views.values():
@@ -185,83 +204,77 @@ class Fuser:
                     view.fundamental[other.name] = tuple(tuple(float(x) for x in row)
                                                          for row in f)
         self._update = self._paper if method == 'paper' else self._naive
-        self._newest = None
-        #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
-        #: reason.
-        self.stats = Counter()
 
     @property
     def camera_names(self) -> List[str]:
         """Return the configured camera names, in order."""
         return list(self._views)
 
+    @property
+    def sync_tolerance_ns(self) -> int:
+        """Return the sync tolerance in force [ns] (the gate's)."""
+        return self.gate.sync_tolerance_ns
+
+    @property
+    def session(self) -> int:
+        """Return the session number: it increments whenever the gate starts a new session."""
+        return self.gate.session
+
+    def off_timeline(self, stamp_ns: int) -> bool:
+        """
+        Tell whether a stamp jumps away from the current session (see the gate).
+
+        The fuser node asks this before buffering a point: such a point goes to
+        :meth:`update` directly, which holds it until the cameras agree on a new session
+        (:attr:`session` changes) or drops it as one camera's ``stamp_outlier``.
+
+        :param stamp_ns: the stamp [ns]
+        :return: True when farther than the rig's max gap from the session's newest stamp
+        """
+        return self.gate.off_timeline(stamp_ns)
+
     def reset(self) -> None:
-        """Forget all history (counters are kept)."""
+        """Forget all history, the measured frame periods included (counters are kept)."""
+        self.gate.reset()
+        self._forget()
+
+    def _forget(self) -> None:
         for view in self._views.values():
             view.frames.clear()
-        self._newest = None
+        self.plausibility.reset()
 
     def update(self, observation: Observation) -> Optional[Estimate]:
         """
         Process one observation.
 
         :param observation: camera name, stamp [ns], raw pixel
-        :return: the estimate at this shutter event, or None (the reason is counted in stats)
+        :return: the estimate at this shutter event, or None (the reason is counted in stats,
+            or the observation is held by the gate until a new session is confirmed)
         """
+        admission = self.gate.admit(observation)
+        if admission.new_session:
+            self._forget()
+        result = None
+        for item in admission.ready:
+            # Only the last can give an estimate: the others open a session from one camera.
+            result = self._fuse(item)
+        return result
+
+    def _fuse(self, item: Admitted) -> Optional[Estimate]:
         stats = self.stats
-        stats['observations'] += 1
-        camera, stamp, u, v = observation
-        view = self._views.get(camera)
-        if view is None:
-            stats['unknown_camera'] += 1
-            return None
-        if not (math.isfinite(u) and math.isfinite(v)):
-            stats['non_finite'] += 1
-            return None
-        try:
-            stamp = operator.index(stamp)  # ints and numpy integers; floats would lose ns
-        except TypeError:
-            stats['bad_stamp'] += 1
-            return None
+        camera, stamp, _, _ = item.observation
+        view = self._views[camera]
         frames = view.frames
-        newest = self._newest
-        if newest is not None and newest - stamp > self.max_gap_ns:
-            # Time jumped back by more than max_gap (a replay looping, a restarted clock): a new
-            # session, not a late observation.
-            self.reset()
-            stats['resets'] += 1
-            newest = None
-        if frames and stamp <= frames[-1].stamp:
-            stats['duplicate' if stamp == frames[-1].stamp else 'out_of_order'] += 1
-            return None
-        # Later than its own camera's last frame but earlier than another camera's newest: a
-        # detector slower than the other (or an executor taking callbacks out of order).
-        late = newest is not None and stamp < newest
-        if newest is not None and stamp - newest > self.max_gap_ns:
-            # A pause of the whole rig: the next flight starts from scratch.
-            self.reset()
-            stats['resets'] += 1
-        elif frames and stamp - frames[-1].stamp > self.max_gap_ns:
-            frames.clear()  # this camera was silent: its old frames say nothing now
-            stats['resets'] += 1
-        x, y = view.camera.normalize_one(u, v)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            stats['undistort_failed'] += 1
-            return None
+        if item.fresh:
+            frames.clear()
+        x, y = item.x, item.y
         fx, skew, cx, fy, cy = view.k
         frame = _Frame(stamp, (fx * x + skew * y + cx, fy * y + cy),
                        view.camera.direction_of(x, y))
-        if frames:
-            interval = stamp - frames[-1].stamp
-            if view.period is None or interval < view.period:
-                view.period = interval
-                self.sync_tolerance_ns = min(self.max_sync_tolerance_ns,
-                                             int(interval * _SYNC_PERIOD_FRACTION))
         frames.append(frame)
         if len(frames) > _HISTORY:
             del frames[0]
-        if not late:
-            self._newest = stamp
+        late = item.late
 
         partner = self._partner(view, stamp)
         if partner is None:
@@ -283,6 +296,10 @@ class Fuser:
         if not (math.isfinite(point[0]) and math.isfinite(point[1]) and math.isfinite(point[2])):
             stats['degenerate'] += 1
             return None
+        plausibility = self.plausibility
+        plausibility.window_ns = self.gate.rig_gap_ns  # "recent": a few frame periods
+        if not plausibility.accept(stamp, point):
+            return None
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
 
@@ -293,13 +310,15 @@ class Fuser:
         Observations are sorted by stamp first (ties keep their given order), so
         rows of a file may come in any order.  One estimate per shutter event:
         where a synchronized pair's second observation gives the direct stereo
-        point, it supersedes the prediction made at the first.
+        point, it supersedes the prediction made at the first.  At the end, an
+        observation still held by the gate (a jump no camera confirmed) is
+        dropped as ``stamp_outlier``.
 
         :param observations: the observations, any order
         :return: the estimates in stamp order
         """
         estimates = []
-        for observation in sorted(observations, key=lambda obs: obs.stamp_ns):
+        for observation in sorted(observations, key=_sort_key):
             estimate = self.update(observation)
             if estimate is None:
                 continue
@@ -309,17 +328,19 @@ class Fuser:
                 estimates[-1] = estimate
             else:
                 estimates.append(estimate)
+        self.gate.flush()
         return estimates
 
     # -- methods --------------------------------------------------------------------------------
 
     def _partner(self, view: _View, stamp: int) -> Optional[_View]:
-        """Return the other camera that fired most recently within max_gap, if any."""
+        """Return the other camera that fired most recently within its max gap, if any."""
         best = None
+        gaps = self.gate.max_gaps
         for other in self._views.values():
             if other is view or not other.frames:
                 continue
-            if stamp - other.frames[-1].stamp > self.max_gap_ns:
+            if stamp - other.frames[-1].stamp > gaps[other.name]:
                 continue
             if best is None or other.frames[-1].stamp > best.frames[-1].stamp:
                 best = other
@@ -337,14 +358,18 @@ class Fuser:
         return None if point is None else (point, 'naive')
 
     def _paper(self, view: _View, frame: _Frame, partner: _View):
+        gate = self.gate
         partner_newest = partner.frames[-1]
-        if frame.stamp - partner_newest.stamp <= self.sync_tolerance_ns:
+        if frame.stamp - partner_newest.stamp <= gate.sync_tolerance_ns:
             point = self._direct(view, frame, partner, partner_newest)
             return None if point is None else (point, 'sync')
 
         # Anchors: the two newest earlier frames of either camera at which a pseudo-stereo point
-        # exists, at least sync_tolerance apart (normally B's t'-1 and A's t-1).
-        oldest = frame.stamp - self.max_gap_ns
+        # exists, more than the baseline floor apart (normally B's t'-1 and A's t-1): Eq. 3
+        # never divides by a shorter baseline, whatever the phase or a double trigger.
+        floor = gate.baseline_floor_ns
+        gaps = gate.max_gaps
+        oldest = frame.stamp - max(gaps[view.name], gaps[partner.name])
         own, theirs = view.frames, partner.frames
         i, j = len(own) - 2, len(theirs) - 1
         anchors = []
@@ -357,7 +382,7 @@ class Fuser:
                 j -= 1
             if candidate.stamp < oldest:
                 break
-            if anchors and anchors[0][0] - candidate.stamp <= self.sync_tolerance_ns:
+            if anchors and anchors[0][0] - candidate.stamp <= floor:
                 continue
             point = self._anchor(candidate, x_view, y_view)
             if point is not None:
@@ -399,15 +424,15 @@ class Fuser:
         if before is None:
             # Y's history starts after this frame: only a simultaneous Y frame can serve.
             point = None
-            if after.stamp - stamp <= self.sync_tolerance_ns:
+            if after.stamp - stamp <= self.gate.sync_tolerance_ns:
                 point = triangulate_rays_one(x_view.center, frame.direction, y_view.center,
                                              after.direction)
         else:
             # Step I: linear interpolation over stamps (consecutive frames of a camera are never
-            # more than max_gap apart: update() clears the history of a camera that was silent
-            # longer). For X = camera 1 at t-1 this is Eq. 1,
-            # (delta12 * u(t'-2) + delta21 * u(t'-1)) / (delta12 + delta21): each sample is
-            # weighted by the *other* sample's distance in time.
+            # more than its max gap apart: the gate marks the frame after a longer silence
+            # fresh and the camera's older frames are cleared). For X = camera 1 at t-1 this is
+            # Eq. 1, (delta12 * u(t'-2) + delta21 * u(t'-1)) / (delta12 + delta21): each sample
+            # is weighted by the *other* sample's distance in time.
             w_after = (stamp - before.stamp) / (after.stamp - before.stamp)
             w_before = 1.0 - w_after
             iu = w_before * before.ideal[0] + w_after * after.ideal[0]
@@ -428,6 +453,14 @@ class Fuser:
                                          y_view.ideal_to_direction(iu, iv))
         frame.anchors[y_view.name] = point
         return point
+
+
+def _sort_key(observation) -> tuple:
+    """Order observations by stamp; stamps that are not numbers (dropped later) go last."""
+    stamp = observation[1]
+    if isinstance(stamp, numbers.Real) and stamp == stamp:
+        return (0, stamp)
+    return (1, 0)
 
 
 def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],

@@ -159,6 +159,9 @@ def test_fuser_node_stops_on_a_stale_camera_and_resumes(context, namespace):
     ([Parameter('calibration_files', value=['a.yaml'])], 'calibration_files'),
     ([Parameter('sync_tolerance_s', value=0.2)], 'max_gap'),
     ([Parameter('world_frame', value='')], 'world_frame'),
+    ([Parameter('workspace_min_m', value=[0.0, 0.0])], 'workspace_min_m'),
+    ([Parameter('workspace_min_m', value=[0.0, 0.0, 2.0]),
+      Parameter('workspace_max_m', value=[1.0, 1.0, 1.0])], 'workspace_min_m'),
 ])
 def test_fuser_rejects_bad_parameters(context, namespace, overrides, match):
     with pytest.raises(StartupError, match=match):
@@ -452,8 +455,42 @@ def test_fuser_starts_a_new_session_when_a_replay_loops(context, namespace):
     _, values = next(r for r in reports if r and r[1]['observations'] == len(looped))
     # A new session, not a second pass of late points; the timing statistics stay right.
     assert _late(values) == [0]
-    assert values['new sessions (time jumped back)'] == 1
+    assert values['new sessions (time jumped or paused)'] == 1
     assert values['delta camera1->camera2 mean [ms]'] == pytest.approx(1e3 / 60, abs=1e-3)
+
+
+def test_fuser_node_drops_one_bad_stamp_without_a_new_session(context, namespace):
+    # One point stamped 0 (a camera's bad stamp) used to start a new session and lose the next
+    # estimates; the core decides it is that camera's outlier, and the node asks the core.
+    cameras, _, observations = _observations()
+    k = len(observations) // 2
+    faulty = observations[:k] + [observations[k]._replace(stamp_ns=0)] + observations[k:]
+    name = f'fuser{next(_COUNTER)}'
+    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
+        Parameter('diagnostics_period_s', value=0.05), Parameter('image_margin', value=0.2),
+        Parameter('max_speed_mps', value=30.0),
+        Parameter('workspace_min_m', value=[-5.0, -5.0, -1.0]),
+        Parameter('workspace_max_m', value=[5.0, 5.0, 4.0])])
+    harness = Harness(context, namespace, fuser)
+    reports = []
+    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, faulty, received)
+        assert harness.spin_until(lambda: any(
+            r and r[1]['observations'] == len(faulty) for r in reports))
+    finally:
+        harness.close()
+    expected, _ = fuse(cameras, observations)
+    assert [r[0] for r in received] == [e.stamp_ns for e in expected]
+    _, values = next(r for r in reports if r and r[1]['observations'] == len(faulty))
+    assert values['dropped: stamp_outlier'] == 1
+    assert values['estimates'] + _drops(values) == len(faulty)
+    # The node's parameters reach the core.
+    assert fuser.fuser.gate.image_margin == 0.2
+    assert fuser.fuser.plausibility.max_speed_mps == 30.0
+    assert fuser.fuser.plausibility.workspace_max_m == (5.0, 5.0, 4.0)
 
 
 def test_bringup_real_refuses_the_simulated_calibration(capsys, tmp_path):

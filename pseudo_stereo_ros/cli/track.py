@@ -34,6 +34,7 @@ import numpy as np
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..detection import BallDetector
+from ..errors import FuserConfigError
 from ..evaluation.table1 import score
 from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUTH_TOPIC,
                              image_point_topic, image_topic, read_images,
@@ -41,7 +42,8 @@ from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUT
                              write_estimates as write_bag_estimates)
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..formats.yaml_io import read_yaml
-from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
+from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_MAX_SPEED_MPS,
+                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS)
 from ..records import Observation
 
 NAME = 'track'
@@ -74,7 +76,21 @@ def add_arguments(parser) -> None:
                         metavar='S', help='observations closer than this are simultaneous '
                                           '(default: %(default)s s)')
     parser.add_argument('--max-gap', type=float, default=DEFAULT_MAX_GAP_NS / 1e9, metavar='S',
-                        help='longest gap bridged by interpolation (default: %(default)s s)')
+                        help='upper bound of the longest gap bridged by interpolation; each '
+                             'camera uses at most 4.5 of its measured frame periods (default: '
+                             '%(default)s s)')
+    parser.add_argument('--image-margin', type=float, default=DEFAULT_IMAGE_MARGIN,
+                        metavar='F', help='drop points farther outside the image than this '
+                                          'fraction of its size (default: %(default)s; inf: '
+                                          'no check)')
+    parser.add_argument('--max-speed', type=float, default=DEFAULT_MAX_SPEED_MPS,
+                        metavar='MPS', help='drop estimates implying a faster motion '
+                                            '(default: %(default)s m/s; 0: no check)')
+    parser.add_argument('--workspace-min', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
+                        help='lower corner of the workspace [m]: drop estimates outside '
+                             '(default: unbounded)')
+    parser.add_argument('--workspace-max', type=float, nargs=3, metavar=('X', 'Y', 'Z'),
+                        help='upper corner of the workspace [m] (default: unbounded)')
     parser.add_argument('--truth', metavar='TRUTH.csv',
                         help='optional ground truth (stamp_ns,x,y,z): print the error (with '
                              '--bag, a /ball/ground_truth topic in the bag is used by default)')
@@ -193,8 +209,14 @@ def run(args) -> int:
     cameras = cameras_from_args(args.camera)
     options = {'method': args.method,
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
-               'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap')}
-    fuser = Fuser(cameras, **options)
+               'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap'),
+               'image_margin': args.image_margin, 'max_speed_mps': args.max_speed,
+               'workspace_min_m': args.workspace_min, 'workspace_max_m': args.workspace_max}
+    try:
+        fuser = Fuser(cameras, **options)
+    except FuserConfigError as err:
+        raise UsageError(f'fuser options (--sync-tolerance, --max-gap, --image-margin, '
+                         f'--max-speed, --workspace-min/max): {err}') from err
     notes = []
     truth = read_truth(args.truth) if args.truth else None
     truth_name = args.truth

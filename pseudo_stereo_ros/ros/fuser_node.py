@@ -22,13 +22,17 @@ becomes an :class:`~pseudo_stereo_ros.fusion.Observation`, a
 stamp order (holding a point at most ``reorder_window_s``), and every
 estimate is published stamped with the shutter stamp of its event.
 
-A point older than the newest fused one by more than ``max_gap_s`` (a
-replayed bag looping, a restarted clock) starts a new session: the reorder
-buffer and the timing statistics start afresh, as the core fuser does.
+Sessions are the core's decision (:meth:`~pseudo_stereo_ros.fusion.Fuser.off_timeline`):
+a point whose stamp jumps away from the session's timeline (a replayed bag
+looping, a restarted clock, one camera's bad stamp) bypasses the reorder
+buffer and goes to the core, which holds it until the cameras agree on the
+jump or drops it as that camera's ``stamp_outlier``; when the core starts a
+new session, the reorder buffer and the timing statistics start afresh.
 """
 
 from collections import Counter, deque
 import functools
+import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -39,7 +43,8 @@ from visualization_msgs.msg import Marker
 from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
                        point_to_observation, trail_marker)
 from .node_tools import declare, load_cameras, run_node, StartupError
-from ..fusion import DROP_REASONS, Fuser, METHODS
+from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, Fuser,
+                      METHODS)
 from ..records import Observation
 from ..reorder import ReorderBuffer
 from ..stamps import seconds_to_ns
@@ -77,8 +82,22 @@ class FuserNode(Node):
                          'observations of two cameras closer than this are simultaneous [s]',
                          min_value=0.0, read_only=True)
         gap_s = declare(self, 'max_gap_s', 0.1,
-                        'longest interval bridged; older data is not used (stale camera) [s]',
+                        'upper bound of the longest interval bridged; older data is not used '
+                        '(stale camera); each camera uses at most 4.5 measured frame periods [s]',
                         min_value=0.0, read_only=True)
+        image_margin = declare(self, 'image_margin', DEFAULT_IMAGE_MARGIN,
+                               'points farther outside the image than this fraction of its '
+                               'width or height are dropped (outside_image)', min_value=0.0,
+                               read_only=True)
+        max_speed_mps = declare(self, 'max_speed_mps', DEFAULT_MAX_SPEED_MPS,
+                                'estimates implying a faster motion are dropped (implausible) '
+                                '[m/s]; 0 disables', min_value=0.0, read_only=True)
+        workspace_min_m = declare(self, 'workspace_min_m', [-math.inf] * 3,
+                                  'lower corner x, y, z of the workspace; estimates outside are '
+                                  'dropped (implausible) [m]; -.inf: unbounded', read_only=True)
+        workspace_max_m = declare(self, 'workspace_max_m', [math.inf] * 3,
+                                  'upper corner x, y, z of the workspace [m]; .inf: unbounded',
+                                  read_only=True)
         # 0 by default: every point is fused the moment it arrives (lowest latency); a point
         # older than one already fused is dropped and counted. Raise it when the detectors'
         # latencies differ by more than the cameras' phase.
@@ -103,17 +122,20 @@ class FuserNode(Node):
         try:
             self.fuser = Fuser(self.cameras, method=method,
                                sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
-                               max_gap_ns=_seconds_to_ns('max_gap_s', gap_s))
+                               max_gap_ns=_seconds_to_ns('max_gap_s', gap_s),
+                               image_margin=image_margin, max_speed_mps=max_speed_mps,
+                               workspace_min_m=list(workspace_min_m),
+                               workspace_max_m=list(workspace_max_m))
         except ValueError as err:
             if isinstance(err, StartupError):
                 raise
-            raise StartupError(f'parameters sync_tolerance_s / max_gap_s: {err}') from err
+            raise StartupError(f'fuser parameters (sync_tolerance_s, max_gap_s, image_margin, '
+                               f'max_speed_mps, workspace_*_m): {err}') from err
         self._names = list(names)
         self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
-        self._max_gap_ns = self.fuser.max_gap_ns
         self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
         #: Counts: ``late`` (points older than one already fused, over all sessions),
-        #: ``sessions`` (new sessions after time jumped back).
+        #: ``sessions`` (new sessions the core started: stamps jumped, or the rig paused).
         self.node_stats = Counter()
         #: Seconds from a point's arrival to its estimate's publication (no hold), recent ones.
         self.processing_times_s = deque(maxlen=10_000)
@@ -152,9 +174,9 @@ class FuserNode(Node):
         start = time.perf_counter()
         self._inputs[name] += 1
         observation = point_to_observation(msg, name)
-        newest = self._newest_fused_ns
-        if newest is not None and newest - observation.stamp_ns > self._max_gap_ns:
-            self._new_session()
+        if self.fuser.off_timeline(observation.stamp_ns):
+            self._off_timeline(observation)
+            return
         late_before = self.buffer.stats['late']
         released = self.buffer.push(observation.stamp_ns, name, observation,
                                     time.monotonic_ns())
@@ -172,14 +194,17 @@ class FuserNode(Node):
         if not len(self.buffer):
             self._flush_timer.cancel()
 
-    def _new_session(self) -> None:
-        """Time jumped back beyond max_gap: fuse what is held, then start over."""
+    def _off_timeline(self, observation: Observation) -> None:
+        """Fuse what is held, then let the core decide on a stamp far from the session's."""
         for item in self.buffer.flush():
             self._process(item)
-        self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
-        self._last_stamp.clear()
-        self._newest_fused_ns = None
-        self.node_stats['sessions'] += 1
+        session = self.fuser.session
+        self._process(observation)
+        if self.fuser.session != session:  # the cameras agreed on the jump: start over
+            self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
+            self._last_stamp = {observation.camera: observation.stamp_ns}
+            self._newest_fused_ns = observation.stamp_ns
+            self.node_stats['sessions'] += 1
 
     def _process(self, observation: Observation) -> None:
         name, stamp = observation.camera, observation.stamp_ns
@@ -230,7 +255,7 @@ class FuserNode(Node):
         values['resets'] = stats['resets']
         values['late (older than a fused point, after the reorder window)'] = \
             self.node_stats['late']
-        values['new sessions (time jumped back)'] = self.node_stats['sessions']
+        values['new sessions (time jumped or paused)'] = self.node_stats['sessions']
         inputs = sum(self._inputs.values())
         if inputs and not estimates:
             level, message = 'warn', 'receiving image points but no estimates yet'
