@@ -34,8 +34,9 @@ from pseudo_stereo_ros.errors import FuserConfigError
 from pseudo_stereo_ros.formats.csv_io import write_observations
 from pseudo_stereo_ros.fusion import DROP_REASONS, fuse, Fuser
 from pseudo_stereo_ros.records import Observation, positions_array
-from pseudo_stereo_ros.sim.scenarios import (config_dir, DEFAULT_EPOCH_NS, default_rig,
-                                             make_scenario, observe, shutter_stamps, truth_at)
+from pseudo_stereo_ros.rig import config_dir
+from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
+                                             shutter_stamps, truth_at)
 import pytest
 
 # The modules new with these rules (timing, plausibility) are imported inside the tests that
