@@ -192,8 +192,10 @@ class CameraDetectorNode(Node):
         #: Counts: ``frames`` handled, ``published`` points, ``no_ball``, ``bad_image``,
         #: ``size_mismatch`` (frames of another size than the calibration's).
         self.stats = Counter()
-        #: Recent (shutter -> frame available, frame available -> point published) [ns].
-        self.timings_ns = deque(maxlen=_TIMING_SAMPLES)
+        #: Recent shutter -> frame available times of all frames [ns].
+        self.wake_ns = deque(maxlen=_TIMING_SAMPLES)
+        #: Recent frame available -> image point published times [ns] (frames with a ball).
+        self.point_ns = deque(maxlen=_TIMING_SAMPLES)
         self._stamp_source = None
         self._size_warned = False
 
@@ -272,14 +274,14 @@ class CameraDetectorNode(Node):
             self.get_logger().error(f'frame dropped: {str(err).strip()}',
                                     throttle_duration_sec=5.0)
             return
-        msg_header = header(frame.stamp_ns, self.camera_name)
         if found is not None:
-            self._point_pub.publish(image_point(msg_header, found[0], found[1]))
+            self._point_pub.publish(image_point(header(frame.stamp_ns, self.camera_name),
+                                                found[0], found[1]))
+            self.point_ns.append(time.time_ns() - frame.available_ns)
             self.stats['published'] += 1
         else:
             self.stats['no_ball'] += 1
-        done_ns = time.time_ns()
-        self.timings_ns.append((frame.available_ns - frame.stamp_ns, done_ns - frame.available_ns))
+        self.wake_ns.append(frame.available_ns - frame.stamp_ns)
         if self.calibration is not None:
             self._check_size(frame)
             self._info_pub.publish(calibration_to_camera_info(self.calibration, frame.stamp_ns,
@@ -309,12 +311,12 @@ class CameraDetectorNode(Node):
         Return the values of this node's diagnostic status.
 
         :return: counts, the capture loop's failures, and the percentiles (p50, p90, p99) [ms]
-            of shutter -> frame available and frame available -> image point published over
-            the recent frames
+            of shutter -> frame available (all recent frames) and frame available -> image
+            point published (recent frames with a ball; ``timing samples`` of them)
         """
-        timings = list(self.timings_ns)
-        wake = _percentiles_ms([t[0] for t in timings])
-        point = _percentiles_ms([t[1] for t in timings])
+        wake = _percentiles_ms(list(self.wake_ns))
+        point_ns = list(self.point_ns)
+        point = _percentiles_ms(point_ns)
         values = {
             'source': self.source.description,
             'stamp source': self._stamp_source or 'none yet',
@@ -326,7 +328,7 @@ class CameraDetectorNode(Node):
             'dropped not newer': self.capture_loop.stats['not_newer'],
             'failures': self.capture_loop.stats['failures'],
             'recoveries': self.capture_loop.stats['recoveries'],
-            'timing samples': len(timings),
+            'timing samples': len(point_ns),
         }
         for label, (p50, p90, p99) in (('shutter -> frame available', wake),
                                        ('frame available -> image point', point)):
