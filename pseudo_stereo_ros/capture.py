@@ -39,8 +39,8 @@ and a driver latency of 10 ms is as large as the naive method's whole error.
 
 :class:`CaptureLoop` runs a source: it starts it, reads frames and hands them
 on; a source that fails (a camera unplugged, ``read()`` failing) is reported
-at most once per ``report_period_s``, retried with a doubling back-off, and
-resumes by itself.  Frames of a live source older than ``max_frame_age_s``
+once per ``report_period_s`` while it fails, retried with a doubling back-off,
+and resumes by itself.  Frames of a live source older than ``max_frame_age_s``
 when read (a driver's queue after an outage) and frames not newer than the
 last one handed on are dropped and counted, so nothing stale goes out.
 A source has ``description``, ``live`` (frames come from the physical world
@@ -353,7 +353,9 @@ class FileSource:
 
     :param path: the file (anything OpenCV's FFmpeg reads: avi, mp4, mkv, ...)
     :param epoch_ns: stamp of the file's time 0 [ns]; 0: the system time of the first read
-    :param realtime: play at the file's rate (True) or as fast as frames can be read
+    :param realtime: play at the file's rate (True) or as fast as frames can be read; when
+        the first frame's stamp is in the future each frame is released at its stamp (files
+        given one epoch play in step), else at the file's pace from the first read
     :param loop: start again at the end; each pass adds the file's length to the stamps
     :param capture_factory: ``factory(path) -> VideoCapture`` (tests may inject a fake)
     :param system_ns: the system clock [ns]
@@ -376,7 +378,7 @@ class FileSource:
         self._capture = None
         self._index = 0            # frames delivered, all passes
         self._pass_frames = 0      # frames read in this pass
-        self._pass_offset_ns = 0   # added to the file times of this pass
+        self._pass_offset_ns = 0.0  # added to the file times of this pass
         self._last_time_ns = None  # file time of the previous frame of this pass
         self._start = None         # (system ns, stamp ns) of the first frame, for pacing
         self.period_ns = None
@@ -401,18 +403,18 @@ class FileSource:
             raise CaptureError(f'{self.path}: cannot open the video file (missing, not a '
                                'video, or a codec OpenCV lacks)')
         fps = capture.get(cv2.CAP_PROP_FPS)
-        self.period_ns = int(round(1e9 / fps)) if math.isfinite(fps) and fps > 0 else None
+        self.period_ns = 1e9 / fps if math.isfinite(fps) and fps > 0 else None
         self.settings = {'fps': float(fps), 'frames': int(capture.get(cv2.CAP_PROP_FRAME_COUNT)),
                          'width_px': int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)),
                          'height_px': int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT))}
         self._capture = capture
         return []
 
-    def _file_time_ns(self) -> int:
+    def _file_time_ns(self) -> float:
         """Return the file time [ns] of the frame just read: its presentation time."""
         pos_msec = self._capture.get(cv2.CAP_PROP_POS_MSEC)
         if math.isfinite(pos_msec) and pos_msec >= 0:
-            time_ns = int(round(pos_msec * 1e6))
+            time_ns = pos_msec * 1e6
             if self._last_time_ns is None or time_ns > self._last_time_ns:
                 return time_ns
         if self.period_ns is None:
@@ -424,7 +426,7 @@ class FileSource:
         """Start the next pass; return False when the file gave no frame in this one."""
         if self._pass_frames == 0 or self._last_time_ns is None:
             return False
-        self._pass_offset_ns += self._last_time_ns + (self.period_ns or 0)
+        self._pass_offset_ns += self._last_time_ns + (self.period_ns or 0.0)
         self._pass_frames = 0
         self._last_time_ns = None
         if not self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0):
@@ -458,9 +460,13 @@ class FileSource:
         if self._start is None:
             now = self._system_ns()
             if self.epoch_ns == 0:
-                self.epoch_ns = now - time_ns
-            self._start = (now, self.epoch_ns + time_ns)
-        stamp_ns = self.epoch_ns + self._pass_offset_ns + time_ns
+                self.epoch_ns = now - int(round(time_ns))
+            first = self.epoch_ns + int(round(time_ns))
+            # Stamps in the future: release each frame at its stamp, so files given one epoch
+            # play in step; else at the file's pace from now.
+            self._start = (first, first) if first >= now else (now, first)
+        # Float ns within the file (exact to well under 1 ns for hours), integer stamps.
+        stamp_ns = self.epoch_ns + int(round(self._pass_offset_ns + time_ns))
         if self.realtime:
             due_ns = self._start[0] + (stamp_ns - self._start[1])
             remaining = due_ns - self._system_ns()
@@ -626,6 +632,7 @@ class CaptureLoop:
         self._failing_since = None
         self._outage_failures = 0
         self._last_report = None
+        self._last_error = None
         self._last_stamp_ns = None
 
     @property
@@ -642,14 +649,32 @@ class CaptureLoop:
         now = self.clock()
         self.stats['failures'] += 1
         self._outage_failures += 1
+        self._last_error = error
         if self._failing_since is None:
             self._failing_since = now
         if self._last_report is None or now - self._last_report >= self.report_period_s:
-            self._last_report = now
-            self.stats['reports'] += 1
-            self.report('error', f'{error} (failing for {now - self._failing_since:.1f} s, '
-                                 f'{self._outage_failures} attempts; retrying in '
-                                 f'{self.retry_delay_s():.2g} s)')
+            self._report_failure(now, self.retry_delay_s())
+
+    def _report_failure(self, now: float, retry_in_s: float) -> None:
+        self._last_report = now
+        self.stats['reports'] += 1
+        self.report('error', f'{self._last_error} (failing for '
+                             f'{now - self._failing_since:.1f} s, {self._outage_failures} '
+                             f'attempts; retrying in {retry_in_s:.2g} s)')
+
+    def _wait_to_retry(self, stop) -> None:
+        """Wait out the back-off; report the continuing failure once per report period."""
+        retry_at = self.clock() + self.retry_delay_s()
+        while True:
+            now = self.clock()
+            next_report = self._last_report + self.report_period_s
+            if stop.wait(max(min(retry_at, next_report) - now, 0.0)):
+                return
+            now = self.clock()
+            if now >= retry_at:
+                return
+            if now >= next_report:
+                self._report_failure(now, retry_at - now)
 
     def _recovered(self) -> None:
         if self._failing_since is None:
@@ -677,14 +702,14 @@ class CaptureLoop:
                         self.report('warn', warning)
                 except CaptureError as err:
                     self._failed(err)
-                    stop.wait(self.retry_delay_s())
+                    self._wait_to_retry(stop)
                     continue
             try:
                 frame = self.source.read(stop.wait)
             except CaptureError as err:
                 self.source.release()
                 self._failed(err)
-                stop.wait(self.retry_delay_s())
+                self._wait_to_retry(stop)
                 continue
             if frame is None:
                 if stop.is_set():
