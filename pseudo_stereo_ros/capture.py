@@ -248,7 +248,8 @@ class DeviceSource:
         :return: one warning per setting the camera refused or changed
         :raises CaptureError: the device cannot be opened
         """
-        if isinstance(self.device, str) and not os.path.exists(self.device):
+        if self._factory is _default_device_capture and isinstance(self.device, str) and \
+                not os.path.exists(self.device):
             # Checked here: OpenCV would print a warning of its own at every retry.
             raise CaptureError(f'{self.description}: no such device (unplugged?)')
         capture = self._factory(self.device)

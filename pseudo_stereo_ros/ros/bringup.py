@@ -56,7 +56,7 @@ from ..fusion import METHODS
 from ..rig import config_dir
 from ..sim.scenarios import SCENARIOS
 
-__all__ = ['SOURCES', 'build_parser', 'camera_sources', 'main', 'write_plot']
+__all__ = ['SOURCES', 'build_nodes', 'build_parser', 'camera_sources', 'main', 'write_plot']
 
 #: Per-camera sources: ``topic`` is the ``detector`` on a driver's ``image_raw``.
 SOURCES = ('virtual', 'file', 'device', 'topic')
@@ -199,8 +199,18 @@ def camera_sources(options) -> List[dict]:
     return cameras
 
 
-def _nodes(options, context, cameras: List[dict], nodes: list) -> None:
-    """Create the nodes into ``nodes`` (so the caller destroys those made before an error)."""
+def build_nodes(options, context, cameras: List[dict], nodes: list) -> None:
+    """
+    Create bringup's nodes: the fuser, a camera_detector (or detector) per camera, the monitor.
+
+    :param options: parsed :func:`build_parser` options (``method``, ``scenario``)
+    :param context: the rclpy context
+    :param cameras: :func:`camera_sources` of the options
+    :param nodes: the nodes are appended here as they are made, so the caller can destroy
+        those made before an error
+    :raises ValueError: cameras that are not virtual without real calibrations; the nodes'
+        start-up errors
+    """
     names = [camera['name'] for camera in cameras]
     # Parameter services multiply the executor's wait set; bringup's nodes are set by files.
     common = {'context': context, 'start_parameter_services': False}
@@ -222,8 +232,7 @@ def _nodes(options, context, cameras: List[dict], nodes: list) -> None:
                          'the fuser section of the params file')
     files = list(fuser.get_parameter('calibration_files').value or [])
     files = files if len(files) == len(names) and all(files) else [None] * len(names)
-    epoch = time.time_ns() + 500_000_000
-    epoch -= epoch % 1_000_000  # a round millisecond, easy to read in stamps
+    starts = []
     for index, camera in enumerate(cameras):
         name, source = camera['name'], camera['source']
         calibration = camera['calibration'] or files[index]
@@ -235,21 +244,31 @@ def _nodes(options, context, cameras: List[dict], nodes: list) -> None:
         if calibration:
             overrides.append(Parameter('calibration_file', value=calibration))
         if source == 'virtual':
-            overrides += [Parameter('phase_s', value=float(camera['phase_s'])),
-                          Parameter('epoch_ns', value=epoch)]
+            overrides.append(Parameter('phase_s', value=float(camera['phase_s'])))
             if options.scenario:
                 overrides.append(Parameter('scenario', value=options.scenario))
         elif source == 'file':
-            overrides += [Parameter('video_file', value=camera['spec']),
-                          Parameter('epoch_ns', value=epoch + round(camera['phase_s'] * 1e9))]
+            overrides.append(Parameter('video_file', value=camera['spec']))
         else:
             overrides.append(Parameter('device', value=camera['spec']))
         nodes.append(CameraDetectorNode(namespace=name, parameter_overrides=overrides,
-                                        **common))
+                                        start=False, **common))
+        starts.append((nodes[-1], source, camera['phase_s']))
     nodes.append(MonitorNode(parameter_overrides=[
         Parameter('camera_names', value=names),
         Parameter('calibration_files',
                   value=[str(f) for f in files] if all(files) else [''])], **common))
+    # Every node exists (building them takes a while on a loaded machine): start the cameras
+    # together, virtual and file ones with one epoch, a round millisecond soon after now.
+    epoch = time.time_ns() + 300_000_000
+    epoch -= epoch % 1_000_000
+    for node, source, phase_s in starts:
+        if source == 'virtual':
+            node.start(epoch_ns=epoch)  # the phase is the node's phase_s
+        elif source == 'file':
+            node.start(epoch_ns=epoch + round(phase_s * 1e9))
+        else:
+            node.start()
 
 
 def write_plot(monitor: MonitorNode, path: str) -> None:
@@ -365,7 +384,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     executor = None
     try:
         try:
-            _nodes(options, context, cameras, nodes)
+            build_nodes(options, context, cameras, nodes)
         except STARTUP_ERRORS as err:
             print(f'bringup: error: cannot start: {err}', file=sys.stderr)
             return 1

@@ -33,6 +33,7 @@ from collections import Counter, deque
 import math
 import threading
 import time
+from typing import Optional
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
@@ -75,11 +76,13 @@ class CameraDetectorNode(Node):
 
     :param capture_factory: ``factory(device or path) -> VideoCapture`` for the device and
         file sources (tests inject a fake camera); None for OpenCV's
+    :param start: start capturing at once; False to call :meth:`start` later (``bringup``
+        starts its cameras together once every node exists)
     :param kwargs: passed to :class:`rclpy.node.Node` (``namespace``, ``parameter_overrides``,
         ``context``, ...)
     """
 
-    def __init__(self, *, capture_factory=None, **kwargs):
+    def __init__(self, *, capture_factory=None, start: bool = True, **kwargs):
         kwargs.setdefault('node_name', 'camera_detector')
         super().__init__(**kwargs)
         source = declare(self, 'source', 'virtual', 'where frames come from',
@@ -199,7 +202,9 @@ class CameraDetectorNode(Node):
         self._stamp_source = None
         self._size_warned = False
 
-        self._point_pub = self.create_publisher(PointStamped, 'ball/image_point', 10)
+        # Reliable with a deep history: a subscriber slowed by a loaded machine gets every
+        # point late rather than losing the ones the writer overwrote (points are tiny).
+        self._point_pub = self.create_publisher(PointStamped, 'ball/image_point', 100)
         self._info_pub = self.create_publisher(CameraInfo, 'camera_info',
                                                qos_profile_sensor_data)
         self._image_pub = (self.create_publisher(Image, 'image_raw', qos_profile_sensor_data)
@@ -218,6 +223,18 @@ class CameraDetectorNode(Node):
         self.get_logger().info(
             f'{self.camera_name}: {source} source {self.source.description}, publishing '
             f'{self._point_pub.topic_name}')
+        if start:
+            self.start()
+
+    def start(self, epoch_ns: Optional[int] = None) -> None:
+        """
+        Start the capture thread.
+
+        :param epoch_ns: for the file and virtual sources, the stamp of time 0 [ns] instead of
+            the ``epoch_ns`` parameter (cameras started together share one epoch)
+        """
+        if epoch_ns is not None and isinstance(self.source, (FileSource, VirtualSource)):
+            self.source.epoch_ns = int(epoch_ns)
         self._thread.start()
 
     # -- start-up -------------------------------------------------------------------------------
@@ -241,8 +258,13 @@ class CameraDetectorNode(Node):
     # -- capture thread -------------------------------------------------------------------------
 
     def _report(self, level: str, text: str) -> None:
-        logger = self.get_logger()
-        {'info': logger.info, 'warn': logger.warning, 'error': logger.error}[level](text)
+        # One call site per severity: rclpy refuses two severities from one line.
+        if level == 'error':
+            self.get_logger().error(text)
+        elif level == 'warn':
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     def _run(self) -> None:
         try:
