@@ -112,10 +112,15 @@ def _coverage(corner_sets: Sequence[np.ndarray], image_size: Tuple[int, int]) ->
     return float(mask.mean())
 
 
+def _is_device(source: str) -> bool:
+    text = str(source).strip()
+    return text.isdigit() or text.startswith('/dev/')
+
+
 def _open_video(source: str, capture_factory):
     """Open a video file, or a device given as ``/dev/videoN`` or an index."""
     text = str(source).strip()
-    is_device = text.isdigit() or text.startswith('/dev/')
+    is_device = _is_device(text)
     if is_device:
         device = int(text) if text.isdigit() else text
         if isinstance(device, str) and not os.path.exists(device):
@@ -150,10 +155,9 @@ def video_boards(source: str, *, board: Tuple[int, int], every_n: int = 10,
     if int(every_n) < 1 or int(max_frames) < 0 or int(max_boards) < 1:
         raise CalibrationFitError(f'need every_n >= 1, max_frames >= 0 and max_boards >= 1, '
                                   f'got {every_n}, {max_frames}, {max_boards}')
-    capture, is_device = _open_video(source, capture_factory)
-    if is_device and not max_frames:
-        capture.release()
+    if _is_device(source) and not max_frames:
         raise CalibrationFitError(f'{source}: a camera needs a frame count (--frames)')
+    capture, _ = _open_video(source, capture_factory)
     cols, rows = (int(x) for x in board)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | \
         cv2.CALIB_CB_FAST_CHECK
@@ -222,10 +226,11 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
         raise CalibrationFitError('no images given')
     flags = distortion_flags(dist_terms)
 
+    names = list(labels) if labels is not None else [None] * len(images)
     image_size = None
     labels, corner_sets, missed = [], [], []
     for index, image in enumerate(images):
-        gray, label = _gray(image, index, labels[index] if labels is not None else None)
+        gray, label = _gray(image, index, names[index])
         size = (gray.shape[1], gray.shape[0])
         if image_size is None:
             image_size = size
