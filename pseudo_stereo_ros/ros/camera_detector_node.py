@@ -45,7 +45,7 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from .detector_node import declare_detector
 from .messages import (array_to_image, calibration_to_camera_info, diagnostic_array,
-                       diagnostic_status, estimate_to_point, header, image_point)
+                       diagnostic_status, estimate_to_point, header, image_point, ns_to_stamp)
 from .node_tools import declare, run_node, StartupError
 from ..calibration import load_calibration, load_camera_info
 from ..camera import Camera
@@ -201,6 +201,9 @@ class CameraDetectorNode(Node):
         self.point_ns = deque(maxlen=_TIMING_SAMPLES)
         self._stamp_source = None
         self._size_warned = False
+        # Built once (ten times the cost of a point message); each frame sets its stamp.
+        self._info = (None if self.calibration is None else
+                      calibration_to_camera_info(self.calibration, 0, self.camera_name))
 
         # Reliable with a deep history: a subscriber slowed by a loaded machine gets every
         # point late rather than losing the ones the writer overwrote (points are tiny).
@@ -304,10 +307,10 @@ class CameraDetectorNode(Node):
         else:
             self.stats['no_ball'] += 1
         self.wake_ns.append(frame.available_ns - frame.stamp_ns)
-        if self.calibration is not None:
+        if self._info is not None:
             self._check_size(frame)
-            self._info_pub.publish(calibration_to_camera_info(self.calibration, frame.stamp_ns,
-                                                              self.camera_name))
+            self._info.header.stamp = ns_to_stamp(frame.stamp_ns)
+            self._info_pub.publish(self._info)
         if self._truth_pub is not None and frame.truth is not None:
             self._truth_pub.publish(estimate_to_point(GroundTruth(frame.stamp_ns, *frame.truth),
                                                       'world'))
