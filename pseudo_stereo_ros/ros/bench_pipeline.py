@@ -615,7 +615,6 @@ def print_camera_detector_rows(seconds: float) -> int:
                extra=p99 + (f' (<= {TARGETS_MS["shutter_to_position_p99"]:g} '
                             f'{"ok" if ok99 else "OVER"})' if positions else '')))
     print(_row('  baseline: bare PointStamped hop', hop))
-    print(_row('fuser node, point received -> published', result['fuser']))
     wake = [float(v.get('shutter -> frame available p50 [ms]', 'nan'))
             for v in result['diagnostics'].values()]
     detect = [float(v.get('frame available -> image point p50 [ms]', 'nan'))
