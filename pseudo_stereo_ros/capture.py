@@ -24,9 +24,10 @@ and a driver latency of 10 ms is as large as the naive method's whole error.
 - :class:`DeviceSource`: a camera through OpenCV (V4L2 on Linux).  V4L2 stamps
   each buffer when the driver captures it, on ``CLOCK_MONOTONIC``; OpenCV
   returns that time as ``CAP_PROP_POS_MSEC``.  It is mapped to the system
-  clock by the offset :class:`ClockMapping` measures (and re-measures, as NTP
-  slews the system clock), minus ``stamp_offset_s`` (exposure and readout
-  before the driver's stamp).  A driver stamping on the system clock is
+  clock by the offset :class:`ClockMapping` measures right after each frame
+  is read (the system clock is slewed and stepped against the monotonic one:
+  by NTP, and by 5 ms/s on the virtual machine this was developed on), minus
+  ``stamp_offset_s`` (exposure and readout before the driver's stamp).  A driver stamping on the system clock is
   recognised; without a usable buffer stamp the time ``read()`` returned is
   used, and the frame says so (``stamp_source``).
 - :class:`FileSource`: a video file; a frame's stamp is ``epoch_ns`` plus
@@ -135,7 +136,8 @@ class ClockMapping:
     The offset system - monotonic is measured by reading the system clock
     between two monotonic readings and keeping the tightest of a few tries
     (its error is half that bracket, a microsecond or less); it is measured
-    again after ``refresh_s``, since NTP slews and steps the system clock.
+    again when older than ``refresh_s``, since NTP slews and steps the system
+    clock (0: at every call; a measurement costs about a microsecond).
 
     :param refresh_s: re-measure the offset when it is older than this [s]
     :param monotonic_ns: the monotonic clock [ns] (injectable for tests)
@@ -170,7 +172,7 @@ class ClockMapping:
     def offset_ns(self) -> int:
         """Return the current offset [ns], re-measured when older than ``refresh_s``."""
         if self._offset_ns is None or \
-                self._monotonic_ns() - self._measured_at > self.refresh_ns:
+                self._monotonic_ns() - self._measured_at >= self.refresh_ns:
             self.measure()
         return self._offset_ns
 
@@ -205,7 +207,7 @@ class DeviceSource:
     :param stamp_offset_s: subtracted from the driver's stamp: the time from the middle of
         the exposure to the moment the driver stamps the buffer [s]
     :param capture_factory: ``factory(device) -> VideoCapture`` (tests inject a fake)
-    :param clock: the monotonic -> system mapping (a new one by default)
+    :param clock: the monotonic -> system mapping (by default one measured at every frame)
     :param system_ns: the system clock [ns]
     """
 
@@ -229,7 +231,7 @@ class DeviceSource:
                           'exposure_s': float(exposure_s)}
         self.stamp_offset_ns = int(round(stamp_offset_s * 1e9))
         self._factory = capture_factory or _default_device_capture
-        self.clock = clock or ClockMapping()
+        self.clock = clock or ClockMapping(refresh_s=0.0)
         self._system_ns = system_ns
         self._capture = None
         self._index = 0

@@ -243,10 +243,11 @@ def test_unplugged_camera_is_reported_once_per_second_and_resumes_without_stale_
     assert camera1.capture_loop.stats['stale'] == 1  # the frame the driver had queued
     mine = [p.stamp_ns for p in points if p.camera == 'camera1']
     assert all(b > a for a, b in zip(mine, mine[1:]))
-    # Every stamp is a capture time of the camera (not the read time, 6 ms later).
+    # Every stamp is a capture time of the camera (not the read time, 6 ms later; the
+    # system clock of a VM may step by 0.5 ms between two readings).
     captured = np.array(sorted(devices[0].captured.values()))
     nearest = np.abs(captured[None, :] - np.array(mine)[:, None]).min(axis=1)
-    assert nearest.max() < 500_000
+    assert nearest.max() < 1_000_000
     # A gap where the camera was out; the fuser published nothing from stale data ...
     gap = np.diff(mine)
     start, end = mine[int(np.argmax(gap))], mine[int(np.argmax(gap)) + 1]

@@ -106,8 +106,9 @@ def test_device_stamps_are_the_driver_capture_times(stamp_clock, source_name):
     for frame in frames:
         captured = device.captured[frame_index(device, frame)]
         assert frame.stamp_source == source_name
-        # The capture time itself (clock offset error: microseconds), not the read time ...
-        assert abs(frame.stamp_ns - captured) < 500_000
+        # The capture time itself (the offset is measured to a microsecond, but the system
+        # clock of a VM may step by 0.5 ms between two readings), not the read time ...
+        assert abs(frame.stamp_ns - captured) < 1_000_000
         # ... which is a driver latency (8 ms) later.
         assert frame.available_ns - frame.stamp_ns > 7_000_000
     assert all(b.stamp_ns > a.stamp_ns for a, b in zip(frames, frames[1:]))
@@ -125,7 +126,7 @@ def test_device_stamp_offset_is_subtracted():
     frame = _read(source, 1)[0]
     source.release()
     captured = device.captured[max(device.captured)]
-    assert abs(frame.stamp_ns - (captured - 2_500_000)) < 500_000
+    assert abs(frame.stamp_ns - (captured - 2_500_000)) < 1_000_000
 
 
 def test_device_without_buffer_stamps_uses_the_read_time():
