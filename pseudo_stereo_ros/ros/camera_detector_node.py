@@ -93,7 +93,7 @@ class CameraDetectorNode(Node):
         calibration_file = declare(
             self, 'calibration_file', '',
             'calibration or camera_info YAML (for camera_info; virtual: also the pose); "": '
-            'config/rig/<camera_name>.yaml when it exists', read_only=True)
+            'virtual: config/rig/<camera_name>.yaml, else no camera_info', read_only=True)
         # Device.
         device = declare(self, 'device', '/dev/video0', 'source device: /dev/videoN or an index',
                          read_only=True)
@@ -243,13 +243,16 @@ class CameraDetectorNode(Node):
     # -- start-up -------------------------------------------------------------------------------
 
     def _calibration(self, path: str, source: str):
+        if not path and source != 'virtual':
+            # The default rig is the simulated one: its intrinsics would be a wrong camera_info
+            # for a real camera.
+            self.get_logger().info('no calibration_file: camera_info is not published')
+            return None
         if not path:
             default = config_dir() / 'rig' / f'{self.camera_name}.yaml'
             if not default.is_file():
-                if source == 'virtual':
-                    raise StartupError(f'parameter calibration_file: none given and no '
-                                       f'{default} (a virtual camera needs its pose)')
-                return None
+                raise StartupError(f'parameter calibration_file: none given and no {default} '
+                                   '(a virtual camera needs its pose)')
             path = str(default)
         try:
             # A virtual camera renders with the pose; a real one needs the intrinsics only,
