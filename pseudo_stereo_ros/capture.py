@@ -27,9 +27,10 @@ and a driver latency of 10 ms is as large as the naive method's whole error.
   clock by the offset :class:`ClockMapping` measures right after each frame
   is read (the system clock is slewed and stepped against the monotonic one:
   by NTP, and by 5 ms/s on the virtual machine this was developed on), minus
-  ``stamp_offset_s`` (exposure and readout before the driver's stamp).  A driver stamping on the system clock is
-  recognised; without a usable buffer stamp the time ``read()`` returned is
-  used, and the frame says so (``stamp_source``).
+  ``stamp_offset_s`` (exposure and readout before the driver's stamp).  A
+  driver stamping on the system clock is recognised; without a usable buffer
+  stamp the time ``read()`` returned is used, and the frame says so
+  (``stamp_source``).
 - :class:`FileSource`: a video file; a frame's stamp is ``epoch_ns`` plus
   its time in the file (the container's presentation time), so stamps are
   those of the recording whatever the playback speed.  Played at the file's
