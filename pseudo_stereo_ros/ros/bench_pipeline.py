@@ -479,7 +479,9 @@ def bench_camera_detectors(seconds: float) -> dict:
 
     names = ['camera1', 'camera2']
     namespace = f'bench_cd_{os.getpid()}'
-    epoch_ns = time.time_ns() + 1_000_000_000
+    # Past the processes' start-up (the cameras' own times include every frame): no frame is
+    # late for its shutter because a process was still starting.
+    epoch_ns = time.time_ns() + 3_000_000_000
     processes = [subprocess.Popen(
         [_script('camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
          '-p', 'source:=virtual', '-p', f'calibration_file:={_rig_file(name)}',
@@ -544,8 +546,9 @@ def bench_camera_detectors(seconds: float) -> dict:
                 all(probe.count_publishers(f'/{namespace}/{name}/ball/image_point')
                     for name in names) and probe.count_publishers(hop_topic)):
             executor.spin_once(timeout_sec=0.05)
-        since_ns = time.time_ns() + 500_000_000  # the reliable connections settle first
-        end = time.monotonic() + 0.5 + seconds
+        # The reliable connections settle first, and the shutters start at the epoch.
+        since_ns = max(time.time_ns() + 500_000_000, epoch_ns)
+        end = time.monotonic() + (since_ns - time.time_ns()) / 1e9 + seconds
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
         fuser_times = list(fuser.processing_times_s)
