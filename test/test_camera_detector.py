@@ -49,7 +49,7 @@ from pseudo_stereo_ros.rig import config_dir
 from pseudo_stereo_ros.ros import bringup
 from pseudo_stereo_ros.ros.camera_detector_node import CameraDetectorNode
 from pseudo_stereo_ros.ros.fuser_node import FuserNode
-from pseudo_stereo_ros.ros.messages import point_to_observation, point_to_xyz
+from pseudo_stereo_ros.ros.messages import point_to_observation, point_to_xyz, stamp_to_ns
 from pseudo_stereo_ros.ros.node_tools import StartupError
 from pseudo_stereo_ros.sim.rendering import BallRenderer
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario,
@@ -59,7 +59,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo
+from sensor_msgs.msg import CameraInfo, Image
 from test_calibrate_sources import OST_YAML
 
 BIN = Path(sys.executable).parent
@@ -374,14 +374,16 @@ def test_a_device_with_a_camera_info_file_publishes_its_intrinsics(context, tmp_
                              Parameter('calibration_file', value=str(ost)),
                              Parameter('publish_image_every_n', value=2)])
     probe = rclpy.create_node('probe', namespace=namespace, context=context)
-    infos, points = [], []
+    infos, points, images = [], [], []
     probe.create_subscription(CameraInfo, 'camera_info', infos.append, qos_profile_sensor_data)
     probe.create_subscription(PointStamped, 'ball/image_point', points.append, 10)
+    probe.create_subscription(Image, 'image_raw', images.append, qos_profile_sensor_data)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     executor.add_node(probe)
     try:
-        assert _spin_until(executor, lambda: len(infos) >= 3 and len(points) >= 3, 10.0)
+        assert _spin_until(executor, lambda: len(infos) >= 4 and len(points) >= 4
+                           and len(images) >= 2, 10.0)
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -389,6 +391,12 @@ def test_a_device_with_a_camera_info_file_publishes_its_intrinsics(context, tmp_
     assert infos[0].k[0] == pytest.approx(512.33471) and infos[0].header.frame_id == 'camera1'
     assert points[0].header.frame_id == 'camera1'
     assert node.diagnostics()['stamp source'] == 'driver'
+    # Every 2nd frame as an image for debugging, with its frame's stamp.
+    point_stamps = [stamp_to_ns(p.header.stamp) for p in points]
+    image_stamps = [stamp_to_ns(i.header.stamp) for i in images]
+    assert set(image_stamps) <= set(point_stamps) | {stamp_to_ns(i.header.stamp) for i in infos}
+    assert len(image_stamps) <= node.stats['frames'] // 2 + 1
+    assert (images[0].width, images[0].height, images[0].encoding) == (640, 480, 'bgr8')
 
 
 def test_bad_source_in_a_process_is_one_fatal_line():
