@@ -44,6 +44,7 @@ setup(
             'fuser = pseudo_stereo_ros.ros.fuser_node:main',
             'virtual_camera = pseudo_stereo_ros.ros.virtual_camera_node:main',
             'monitor = pseudo_stereo_ros.ros.monitor_node:main',
+            'camera_detector = pseudo_stereo_ros.ros.camera_detector_node:main',
             'bringup = pseudo_stereo_ros.ros.bringup:main',
             'bench_pipeline = pseudo_stereo_ros.ros.bench_pipeline:main',
             'replay = pseudo_stereo_ros.ros.replay_node:main',

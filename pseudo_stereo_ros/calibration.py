@@ -49,6 +49,7 @@ __all__ = [
     'calibration_from_dict',
     'calibration_to_dict',
     'load_calibration',
+    'load_camera_info',
     'save_calibration',
 ]
 
@@ -351,3 +352,39 @@ def save_calibration(calibration: CameraCalibration, path: PathLike) -> None:
             raise CalibrationError(f'{os.fspath(path)}: refusing to write non-finite values')
     with open(path, 'w', encoding='utf-8') as stream:
         yaml.safe_dump(data, stream, sort_keys=False)
+
+
+def load_camera_info(path: PathLike) -> CameraCalibration:
+    """
+    Read a camera's intrinsics from a camera_info YAML file, with or without a pose.
+
+    Accepts the files ROS ``camera_calibration`` writes (``ost.yaml``) and
+    ``camera_info_manager`` reads as they are: ``image_width``, ``image_height``,
+    ``camera_name``, ``camera_matrix``, ``distortion_model`` and
+    ``distortion_coefficients`` are used; ``rectification_matrix`` and
+    ``projection_matrix`` are ignored.  Such a file has no extrinsics: the pose is
+    then the identity.  A file of this package (with ``rotation_matrix`` and
+    ``translation``) is read with its pose, as :func:`load_calibration` reads it.
+
+    :param path: the file
+    :return: the calibration (identity pose when the file has none)
+    :raises CalibrationError: the file is missing, not YAML, or malformed (naming the file,
+        the key and the reason); a pose with only one of ``rotation_matrix`` and
+        ``translation`` is malformed
+    """
+    source = os.fspath(path)
+    try:
+        with open(path, encoding='utf-8') as stream:
+            text = stream.read()
+    except OSError as err:
+        raise CalibrationError(f'{source}: cannot read calibration file: {err.strerror}') from err
+    try:
+        data = yaml.safe_load(text)
+        raw = yaml.load(text, Loader=yaml.BaseLoader)  # noqa: S506 - BaseLoader builds no objects
+    except yaml.YAMLError as err:
+        raise CalibrationError(f'{source}: not valid YAML: {err}') from err
+    raw_name = raw.get('camera_name') if isinstance(raw, dict) else None
+    if isinstance(data, dict) and 'rotation_matrix' not in data and 'translation' not in data:
+        data = dict(data, rotation_matrix=np.eye(3).tolist(), translation=[0.0, 0.0, 0.0])
+    return calibration_from_dict(data, source=source,
+                                 raw_name=raw_name if isinstance(raw_name, str) else None)

@@ -31,6 +31,7 @@ __all__ = [
     'BagError',
     'CalibrationError',
     'CalibrationFitError',
+    'CaptureError',
     'CsvError',
     'DetectorConfigError',
     'EncodingError',
@@ -52,6 +53,10 @@ class CalibrationError(PseudoStereoError):
 
 class CalibrationFitError(CalibrationError):
     """The calibration data cannot determine the camera (too few, degenerate or ambiguous)."""
+
+
+class CaptureError(PseudoStereoError):
+    """A frame source cannot be opened or read (a device, a video file); the message names it."""
 
 
 class DetectorConfigError(PseudoStereoError):

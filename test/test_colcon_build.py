@@ -29,7 +29,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 COLCON = Path(sys.executable).parent / 'colcon'
 EXECUTABLES = ('detector', 'fuser', 'virtual_camera', 'monitor', 'bringup', 'bench_pipeline',
-               'replay', 'record', 'pseudo_stereo')
+               'replay', 'record', 'pseudo_stereo', 'camera_detector')
 
 
 @pytest.fixture(scope='module')
@@ -58,7 +58,8 @@ def test_install_tree_has_what_ros2_run_needs(install):
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'pseudo_stereo_ros').is_file()
     assert (share / 'pseudo_stereo_ros' / 'package.xml').is_file()
     for name in ('fuser.yaml', 'detector.yaml', 'bringup.yaml', 'virtual_camera.yaml',
-                 'fastdds_large_images.xml', 'rig/camera1.yaml', 'rig/camera2.yaml'):
+                 'camera_detector.yaml', 'fastdds_large_images.xml', 'rig/camera1.yaml',
+                 'rig/camera2.yaml', 'rig/camera3.yaml'):
         assert (share / 'pseudo_stereo_ros' / 'config' / name).is_file(), name
     for name in EXECUTABLES:
         executable = install / 'lib' / 'pseudo_stereo_ros' / name
@@ -88,6 +89,7 @@ def test_installed_package_finds_its_installed_config(install, tmp_path):
     ('fuser', ['--ros-args', '-p', 'camera_names:=[]'], 'camera_names'),
     ('detector', ['--ros-args', '-p', 'open_kernel_px:=99'], 'open_kernel_px'),
     ('virtual_camera', ['--ros-args', '-p', 'scenario:=loop'], 'scenario'),
+    ('camera_detector', ['--ros-args', '-p', 'source:=webcam'], 'source'),
     ('monitor', ['--ros-args', '-p', 'max_history:=0'], 'max_history'),
     ('replay', ['--ros-args'], 'parameter bag: required'),
     ('record', ['--ros-args'], 'parameter bag: required'),

@@ -32,10 +32,12 @@ def test_quick_benchmark_prints_each_quantity_with_its_baseline_ratio(repo_dir):
             rows[match.group(1)] = (int(match.group(2)), match.group(5))
     measured = ['detector, full frame', 'detector, search window 48 px',
                 'fuser node, point received -> published',
-                'end to end, image stamp -> /ball/position']
+                'end to end, image stamp -> /ball/position',
+                'shutter -> /ball/position published']
     baselines = ['baseline: cv2.cvtColor BGR->HSV, full frame',
                  'baseline: core Fuser.update, same points',
-                 'baseline: image stamp -> bare subscriber']
+                 'baseline: image stamp -> bare subscriber',
+                 'baseline: bare PointStamped hop']
     assert set(measured + baselines) <= set(rows), result.stdout
     for label in measured:
         count, rest = rows[label]

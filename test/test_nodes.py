@@ -494,23 +494,29 @@ def test_fuser_node_drops_one_bad_stamp_without_a_new_session(context, namespace
 
 
 def test_bringup_real_refuses_the_simulated_calibration(capsys, tmp_path):
-    assert bringup.main(['--real', '--duration', '2']) == 1  # before: ran on the sim rig
-    assert "--real needs the real cameras' calibrations" in capsys.readouterr().err
-    assert bringup.main(['--real', '--calibration', 'camera1=a.yaml']) == 2
+    # --real is the device source: each camera needs its device (none here: retried).
+    assert bringup.main(['--real', '--duration', '2']) == 2
+    assert 'source device needs its device' in capsys.readouterr().err
+    devices = ['--real', '--camera', 'camera1=/dev/video_none1', '--camera',
+               'camera2=/dev/video_none2']
+    assert bringup.main(devices + ['--duration', '2']) == 1  # before: ran on the sim rig
+    assert "need the real cameras' calibrations" in capsys.readouterr().err
+    assert bringup.main(devices + ['--calibration', 'camera1=a.yaml']) == 2
     assert 'none for camera2' in capsys.readouterr().err
-    assert bringup.main(['--real', '--calibration', 'camera3=a.yaml']) == 2
-    assert 'not one of --cameras' in capsys.readouterr().err
+    assert bringup.main(devices + ['--calibration', 'camera3=a.yaml']) == 2
+    assert 'not one of the cameras' in capsys.readouterr().err
     # Given per camera (here: files of another rig), the fuser starts with them.
     rig = [str(tmp_path / f'{name}.yaml') for name in ('camera1', 'camera2')]
     for camera, path in zip(default_rig(), rig):
         save_calibration(camera.calibration, path)
     broken = tmp_path / 'broken.yaml'
     broken.write_text('camera_name: [x\n')
-    assert bringup.main(['--real', '--calibration', f'camera1={rig[0]}',
-                         '--calibration', f'camera2={broken}']) == 1
+    assert bringup.main(devices + ['--calibration', f'camera1={rig[0]}',
+                                   '--calibration', f'camera2={broken}']) == 1
     assert 'calibration_files[1] (camera camera2)' in capsys.readouterr().err
-    assert bringup.main(['--real', '--calibration', f'camera1={rig[0]}',
-                         '--calibration', f'camera2={rig[1]}', '--duration', '0.01']) == 0
+    assert bringup.main(devices + ['--calibration', f'camera1={rig[0]}',
+                                   '--calibration', f'camera2={rig[1]}', '--duration',
+                                   '0.01']) == 0
 
 
 def test_bringup_reports_a_malformed_params_file_in_one_line(capfd, tmp_path):

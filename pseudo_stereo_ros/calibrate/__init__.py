@@ -45,7 +45,7 @@ calibration is a file a user keeps, not a per-event result.
 from .checks import CalibrationResult, DISTORTION_TERMS, flag_outliers, OUTLIER_SIGMAS
 from .extrinsics import calibrate_extrinsics
 from .full import auto_dist_terms, calibrate_full, decompose_projection, dlt_projection
-from .intrinsics import calibrate_intrinsics, list_images
+from .intrinsics import calibrate_intrinsics, list_images, video_boards
 from .pair_check import epipolar_check, EpipolarCheck
 from ..errors import CalibrationFitError
 
@@ -64,4 +64,5 @@ __all__ = [
     'epipolar_check',
     'flag_outliers',
     'list_images',
+    'video_boards',
 ]

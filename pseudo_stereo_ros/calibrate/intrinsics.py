@@ -17,6 +17,8 @@ Chessboard intrinsics: camera matrix and distortion from board images (Zhang's m
 
 :func:`calibrate_intrinsics` finds the board corners in each image (OpenCV),
 refuses too few or poorly spread boards, and leaves the pose at identity.
+:func:`video_boards` picks the frames showing the board from a video file or
+a camera device (every n-th frame), so no second tool is needed.
 """
 
 import math
@@ -33,6 +35,7 @@ from ..errors import CalibrationFitError
 __all__ = [
     'calibrate_intrinsics',
     'list_images',
+    'video_boards',
 ]
 
 
@@ -53,9 +56,9 @@ def list_images(directory: Union[str, os.PathLike]) -> list:
     return [os.path.join(directory, name) for name in names]
 
 
-def _gray(image: ImageInput, index: int) -> Tuple[np.ndarray, str]:
+def _gray(image: ImageInput, index: int, label: Optional[str] = None) -> Tuple[np.ndarray, str]:
     if isinstance(image, np.ndarray):
-        label = f'image {index}'
+        label = label or f'image {index}'
         array = image
     else:
         label = os.fspath(image)
@@ -109,10 +112,85 @@ def _coverage(corner_sets: Sequence[np.ndarray], image_size: Tuple[int, int]) ->
     return float(mask.mean())
 
 
+def _is_device(source: str) -> bool:
+    text = str(source).strip()
+    return text.isdigit() or text.startswith('/dev/')
+
+
+def _open_video(source: str, capture_factory):
+    """Open a video file, or a device given as ``/dev/videoN`` or an index."""
+    text = str(source).strip()
+    is_device = _is_device(text)
+    if is_device:
+        device = int(text) if text.isdigit() else text
+        if isinstance(device, str) and not os.path.exists(device):
+            raise CalibrationFitError(f'{text}: no such device')
+        capture = (capture_factory or (lambda d: cv2.VideoCapture(d, cv2.CAP_V4L2)))(device)
+    else:
+        if not os.path.isfile(text):
+            raise CalibrationFitError(f'{text}: no such video file')
+        capture = (capture_factory or cv2.VideoCapture)(text)
+    if capture is None or not capture.isOpened():
+        raise CalibrationFitError(f'{text}: cannot open the {"camera" if is_device else "video"}')
+    return capture, is_device
+
+
+def video_boards(source: str, *, board: Tuple[int, int], every_n: int = 10,
+                 max_frames: int = 0, max_boards: int = 40,
+                 capture_factory=None) -> Tuple[list, list, int]:
+    """
+    Read every n-th frame of a video file or a camera and keep those showing the board.
+
+    :param source: a video file, or a camera: ``/dev/videoN`` or an index
+    :param board: inner corners ``(cols, rows)``
+    :param every_n: look at every n-th frame (consecutive frames of a video are nearly the
+        same view)
+    :param max_frames: stop after this many frames (0: the whole file; a camera needs it)
+    :param max_boards: keep at most this many boards, evenly spread over the ones found
+    :param capture_factory: ``factory(file or device) -> VideoCapture`` (tests)
+    :return: ``(images, labels, frames_read)``: the frames with a board, their labels
+        (``frame N``) and the number of frames read
+    :raises CalibrationFitError: the source cannot be opened or read; bad options
+    """
+    if int(every_n) < 1 or int(max_frames) < 0 or int(max_boards) < 1:
+        raise CalibrationFitError(f'need every_n >= 1, max_frames >= 0 and max_boards >= 1, '
+                                  f'got {every_n}, {max_frames}, {max_boards}')
+    if _is_device(source) and not max_frames:
+        raise CalibrationFitError(f'{source}: a camera needs a frame count (--frames)')
+    capture, _ = _open_video(source, capture_factory)
+    cols, rows = (int(x) for x in board)
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | \
+        cv2.CALIB_CB_FAST_CHECK
+    images, labels = [], []
+    count = 0
+    try:
+        while not max_frames or count < max_frames:
+            ok, frame = capture.read()
+            if not ok or frame is None:
+                break
+            count += 1
+            if (count - 1) % int(every_n):
+                continue
+            gray, _ = _gray(frame, count - 1)
+            if cv2.findChessboardCorners(gray, (cols, rows), flags=flags)[0]:
+                images.append(frame)
+                labels.append(f'frame {count - 1}')
+    finally:
+        capture.release()
+    if count == 0:
+        raise CalibrationFitError(f'{source}: no frame could be read')
+    if len(images) > max_boards:
+        keep = np.unique(np.round(np.linspace(0, len(images) - 1, int(max_boards))).astype(int))
+        images = [images[i] for i in keep]
+        labels = [labels[i] for i in keep]
+    return images, labels, count
+
+
 def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int],
                          square_m: float, camera_name: str = 'camera', dist_terms: int = 4,
                          min_boards: int = 5, min_coverage: float = 0.3,
-                         min_tilt_deg: float = 15.0) -> CalibrationResult:
+                         min_tilt_deg: float = 15.0,
+                         labels: Optional[Sequence[str]] = None) -> CalibrationResult:
     """
     Calibrate a camera's intrinsics and distortion from chessboard images.
 
@@ -128,6 +206,8 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
     :param min_coverage: refuse when the boards cover less than this fraction of the image
     :param min_tilt_deg: refuse when no two boards' normals differ by this angle (parallel
         boards do not separate focal length from distance)
+    :param labels: names of array images in messages and the result (``frame 120``); files
+        are named by their paths
     :return: the result; its calibration has the identity pose
     :raises CalibrationFitError: unreadable images, too few boards, poor coverage or tilt
     """
@@ -146,10 +226,11 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
         raise CalibrationFitError('no images given')
     flags = distortion_flags(dist_terms)
 
+    names = list(labels) if labels is not None else [None] * len(images)
     image_size = None
     labels, corner_sets, missed = [], [], []
     for index, image in enumerate(images):
-        gray, label = _gray(image, index)
+        gray, label = _gray(image, index, names[index])
         size = (gray.shape[1], gray.shape[0])
         if image_size is None:
             image_size = size

@@ -15,9 +15,11 @@
 """
 ``pseudo_stereo calibrate``: write a camera's calibration YAML from chessboards or points.
 
-Modes: ``intrinsics`` (chessboard images), ``extrinsics`` (pose from a
-correspondence CSV and known intrinsics) and ``full`` (everything from a
-correspondence CSV).  A correspondence CSV has the header ``x,y,z,u,v``:
+Modes: ``intrinsics`` (chessboard images, or every n-th frame of a video
+file or camera that shows the board), ``extrinsics`` (pose from a
+correspondence CSV and known intrinsics, from this package's files or a plain
+camera_info YAML such as ROS camera_calibration's ``ost.yaml``) and ``full``
+(everything from a correspondence CSV).  A correspondence CSV has the header ``x,y,z,u,v``:
 world metres and raw pixels, one point per line.  Every mode prints the RMS
 and the residual of each point, flags outliers and draws a PNG of the points
 and their reprojections.
@@ -34,8 +36,8 @@ import numpy as np
 from . import UsageError
 from ..calibrate import (auto_dist_terms, calibrate_extrinsics, calibrate_full,
                          calibrate_intrinsics, CalibrationResult, DISTORTION_TERMS,
-                         list_images)
-from ..calibration import load_calibration, save_calibration
+                         list_images, video_boards)
+from ..calibration import load_camera_info, save_calibration
 from ..formats.csv_io import CsvError, parse_float, read_rows
 
 __all__ = ['NAME', 'HELP', 'add_arguments', 'read_correspondences', 'run', 'plot_result']
@@ -53,11 +55,23 @@ def add_arguments(parser) -> None:
     modes = parser.add_subparsers(dest='mode', metavar='MODE', required=True)
 
     intrinsics = modes.add_parser(
-        'intrinsics', help='camera matrix and distortion from chessboard images',
-        description='Camera matrix and distortion from chessboard images (OpenCV); the pose in '
-                    'the written file is the identity: run `extrinsics` next.')
-    intrinsics.add_argument('--images', required=True, metavar='DIR',
-                            help='directory of chessboard images (png, jpg, bmp, tif, pgm)')
+        'intrinsics', help='camera matrix and distortion from chessboard images or a video',
+        description='Camera matrix and distortion from chessboard images, or from every n-th '
+                    'frame of a video file or camera that shows the board (OpenCV); the pose '
+                    'in the written file is the identity: run `extrinsics` next.')
+    frames = intrinsics.add_mutually_exclusive_group(required=True)
+    frames.add_argument('--images', metavar='DIR',
+                        help='directory of chessboard images (png, jpg, bmp, tif, pgm)')
+    frames.add_argument('--video', metavar='FILE|DEVICE',
+                        help='a video file, or a camera (/dev/videoN or an index)')
+    intrinsics.add_argument('--every', type=int, default=10, metavar='N',
+                            help='--video: look at every n-th frame (default 10)')
+    intrinsics.add_argument('--frames', type=int, default=0, metavar='N',
+                            help='--video: read at most N frames (0: the whole file; needed '
+                                 'for a camera, e.g. 600 = 20 s at 30 fps)')
+    intrinsics.add_argument('--max-boards', type=int, default=40, metavar='N',
+                            help='--video: use at most N boards, spread over the video '
+                                 '(default 40)')
     intrinsics.add_argument('--board', required=True, metavar='COLSxROWS',
                             help='inner corners per row x per column (9x7 squares -> 8x6)')
     intrinsics.add_argument('--square', required=True, metavar='M',
@@ -74,7 +88,10 @@ def add_arguments(parser) -> None:
         description='Camera pose (x_cam = R x_world + t) from at least 4 correspondences '
                     '(a plane is fine) and a calibration file giving the intrinsics.')
     extrinsics.add_argument('--intrinsics', required=True, metavar='CAMERA_INFO.yaml',
-                            help='calibration YAML with the camera matrix and distortion')
+                            help='calibration YAML with the camera matrix and distortion: a '
+                                 'file of this package or a camera_info YAML (ROS '
+                                 'camera_calibration ost.yaml; rectification and projection '
+                                 'matrices are ignored)')
     extrinsics.add_argument('--points', required=True, metavar='CORR.csv',
                             help='correspondences, header x,y,z,u,v (metres, raw pixels)')
     _add_output_arguments(extrinsics)
@@ -154,12 +171,20 @@ def run(args) -> int:
             square = math.nan
         if not (math.isfinite(square) and square > 0):
             raise UsageError(f'--square {args.square!r}: expected a positive length [m]')
+        labels = None
+        if args.video is not None:
+            images, labels, count = video_boards(
+                args.video, board=board, every_n=args.every, max_frames=args.frames,
+                max_boards=args.max_boards)
+            print(f'{args.video}: {count} frames read; using {len(images)} of every '
+                  f'{args.every}th that show the {board[0]}x{board[1]} board')
+        else:
+            images = list_images(args.images)
         result = calibrate_intrinsics(
-            list_images(args.images), board=board, square_m=square,
-            camera_name=args.name or out.stem, dist_terms=args.dist_terms,
-            min_boards=args.min_boards)
+            images, board=board, square_m=square, camera_name=args.name or out.stem,
+            dist_terms=args.dist_terms, min_boards=args.min_boards, labels=labels)
     elif args.mode == 'extrinsics':
-        intrinsics = load_calibration(args.intrinsics)
+        intrinsics = load_camera_info(args.intrinsics)
         world, pixels, lines = read_correspondences(args.points)
         result = calibrate_extrinsics(intrinsics, world, pixels, camera_name=args.name,
                                       lines=lines)

@@ -33,7 +33,12 @@ compare between machines and runs:
    the wall clock at publication and receives the positions (paper: 4.13 ms
    from capture to 3D); baseline: image stamp to the same image received by
    a bare subscriber in another process over the same DDS set-up (the
-   transport), so the difference is the pipeline's own cost.
+   transport), so the difference is the pipeline's own cost;
+4. ``camera_detector`` processes (virtual source: capture and detection in
+   one process, no image over DDS) feeding a fuser: shutter stamp ->
+   ``/ball/position`` published (target: median 1.5 ms, p99 5 ms) and frame
+   available -> image point (target 1 ms); baseline: a bare PointStamped hop
+   between processes in the same run; and where each millisecond goes.
 
 Absolute numbers depend on the machine and its load; compare the ratios.
 """
@@ -52,11 +57,14 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ['main', 'transport_probe_main']
+__all__ = ['bench_camera_detectors', 'hop_probe_main', 'main', 'print_camera_detector_rows',
+           'transport_probe_main']
 
 PAPER_IMAGE_ANALYSIS_MS = 2.6
 PAPER_CAPTURE_TO_3D_MS = 4.13
-TARGETS_MS = {'window': 1.0, 'full': 3.0, 'fuser': 0.5, 'end_to_end': 5.0}
+TARGETS_MS = {'window': 1.0, 'full': 3.0, 'fuser': 0.5, 'end_to_end': 5.0,
+              'camera_detector': 1.0, 'shutter_to_position': 1.5,
+              'shutter_to_position_p99': 5.0}
 #: Run sizes: frames (detector), image points (fuser), seconds of end-to-end streaming.
 FULL_RUN = {'frames': 88, 'points': 300, 'seconds': 5.0}
 QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0}
@@ -402,6 +410,236 @@ def bench_end_to_end(seconds: float) -> dict:
             'transport': _latencies(transport_pairs, since_ns)}
 
 
+# -- camera_detector: capture and detection in one process ----------------------------------------
+
+def hop_probe_main(argv: Optional[List[str]] = None) -> int:
+    """
+    Publish bare PointStamped messages stamped at publication until SIGINT (a baseline).
+
+    :param argv: the topic and the rate [Hz]; None for ``sys.argv[1:]``
+    :return: exit status
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from geometry_msgs.msg import PointStamped
+    from .messages import ns_to_stamp
+
+    topic, rate = sys.argv[1:] if argv is None else argv
+    rclpy.init(args=[])
+    node = None
+    try:
+        node = rclpy.create_node('bench_hop_probe')
+        publisher = node.create_publisher(PointStamped, topic, 10)
+
+        def tick():
+            msg = PointStamped()
+            msg.header.stamp = ns_to_stamp(time.time_ns())
+            publisher.publish(msg)
+
+        node.create_timer(1.0 / float(rate), tick)
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def bench_camera_detectors(seconds: float) -> dict:
+    """
+    Time two ``camera_detector`` processes (virtual source) feeding a fuser in this process.
+
+    Each camera_detector runs as its own process (virtual cameras, 30 fps, the
+    second 1/60 s later; detection with the 48 px search window) and reports
+    its own shutter -> frame available and frame available -> image point
+    times on ``/diagnostics``.  The fuser node runs alone in this process's
+    executor; its image point subscriptions and its ``/ball/position``
+    publisher are wrapped (through the node's public ``subscriptions`` and
+    ``publishers``) to note when a point's callback starts and when its
+    position is published.  Baseline: a bare PointStamped hop from a third
+    process publishing at 60 Hz, stamped at publication, received by a
+    subscription in the same executor.
+
+    :param seconds: measured time after the processes are connected [s]
+    :return: ``points`` (shutter stamp -> the fuser's callback starts [s]), ``positions``
+        (shutter stamp -> ``/ball/position`` published [s]), ``hop`` (bare hop [s]),
+        ``fuser`` (the fuser node's receive -> publish [s]) and ``diagnostics`` (camera name
+        -> the camera_detector's last diagnostic values)
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.logging import LoggingSeverity
+    from rclpy.parameter import Parameter
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PointStamped
+    from .fuser_node import FuserNode
+    from .messages import stamp_to_ns
+
+    names = ['camera1', 'camera2']
+    namespace = f'bench_cd_{os.getpid()}'
+    # Past the processes' start-up (the cameras' own times include every frame): no frame is
+    # late for its shutter because a process was still starting.
+    epoch_ns = time.time_ns() + 3_000_000_000
+    processes = [subprocess.Popen(
+        [_script('camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
+         '-p', 'source:=virtual', '-p', f'calibration_file:={_rig_file(name)}',
+         '-p', 'fps:=30.0', '-p', f'phase_s:={index / 60.0}', '-p', f'epoch_ns:={epoch_ns}',
+         '-p', f'seed:={index}', '-p', 'ground_truth_topic:=ball/ground_truth',
+         '-p', 'diagnostics_period_s:=0.5', '--log-level', 'warn'], stdin=subprocess.DEVNULL)
+        for index, name in enumerate(names)]
+    code = ('import sys\n'
+            'from pseudo_stereo_ros.ros.bench_pipeline import hop_probe_main\n'
+            'sys.exit(hop_probe_main())\n')
+    hop_topic = f'/{namespace}/hop'
+    processes.append(subprocess.Popen([sys.executable, '-c', code, hop_topic, '60'],
+                                      stdin=subprocess.DEVNULL))
+    arrivals = {'points': [], 'positions': [], 'hop': []}
+    diagnostics = {}
+    since_ns = None
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    rclpy.logging.set_logger_level(f'{namespace}.fuser', LoggingSeverity.WARN)
+    try:
+        fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
+            Parameter('reorder_window_s', value=0.0), Parameter('diagnostics_period_s',
+                                                                value=0.0)])
+
+        def timed_callback(callback):
+            def wrapper(msg):
+                arrivals['points'].append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+                return callback(msg)
+            return wrapper
+
+        def timed_publish(publish):
+            def wrapper(msg):
+                publish(msg)
+                arrivals['positions'].append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+            return wrapper
+
+        for subscription in fuser.subscriptions:
+            if subscription.topic_name.endswith('/ball/image_point'):
+                subscription.callback = timed_callback(subscription.callback)
+        for publisher in fuser.publishers:
+            if publisher.topic_name.endswith('/ball/position'):
+                publisher.publish = timed_publish(publisher.publish)
+        probe = rclpy.create_node('bench_cd_probe', namespace=namespace, context=context)
+
+        def on_hop(msg):
+            arrivals['hop'].append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                for name in names:
+                    if status.name == f'camera_detector: {name}' and \
+                            status.hardware_id.startswith('virtual'):
+                        diagnostics[name] = {v.key: v.value for v in status.values}
+
+        probe.create_subscription(PointStamped, hop_topic, on_hop, 100)
+        probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(fuser)
+        executor.add_node(probe)
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and not (
+                all(probe.count_publishers(f'/{namespace}/{name}/ball/image_point')
+                    for name in names) and probe.count_publishers(hop_topic)):
+            executor.spin_once(timeout_sec=0.05)
+        # The reliable connections settle first, and the shutters start at the epoch.
+        since_ns = max(time.time_ns() + 500_000_000, epoch_ns)
+        end = time.monotonic() + (since_ns - time.time_ns()) / 1e9 + seconds
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        fuser_times = list(fuser.processing_times_s)
+        executor.shutdown()
+        fuser.destroy_node()
+        probe.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        for process in processes:
+            process.send_signal(signal.SIGINT)
+        for process in processes:
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+    result = {key: _latencies(pairs, since_ns) for key, pairs in arrivals.items()}
+    result['fuser'] = fuser_times
+    result['diagnostics'] = diagnostics
+    return result
+
+
+def _rig_file(name: str) -> str:
+    from ..rig import config_dir
+    return str(config_dir() / 'rig' / f'{name}.yaml')
+
+
+def _diagnostic_row(label: str, values: dict, key: str, *, target_ms: Optional[float] = None,
+                    count_key: str = 'frames') -> str:
+    """Return a table row from a camera_detector's reported percentiles [ms]."""
+    try:
+        n = int(values[count_key])
+        median, p90 = float(values[f'{key} p50 [ms]']), float(values[f'{key} p90 [ms]'])
+        p99 = float(values[f'{key} p99 [ms]'])
+    except (KeyError, ValueError):
+        return f'  {label:<{_LABEL_WIDTH}s}  no diagnostics received'
+    target = ''
+    if target_ms is not None:
+        target = f'<= {target_ms:g} ' + ('ok' if median <= target_ms else 'OVER')
+    return (f'  {label:<{_LABEL_WIDTH}s}{n:>6d}{median:>9.3f}{p90:>9.3f}  {target:<13s}'
+            f'{"":>7s}  p99 {p99:.3f}').rstrip()
+
+
+def print_camera_detector_rows(seconds: float) -> int:
+    """
+    Run :func:`bench_camera_detectors` and print its rows and where the time goes.
+
+    :param seconds: measured time [s]
+    :return: exit status: 1 when nothing arrived
+    """
+    result = bench_camera_detectors(seconds)
+    positions, points, hop = result['positions'], result['points'], result['hop']
+    print('camera_detector processes (virtual source, 2 x 30 fps) -> fuser; shutter stamps:')
+    for name, values in sorted(result['diagnostics'].items()):
+        print(_diagnostic_row(f'{name}: shutter -> frame available', values,
+                              'shutter -> frame available'))
+        print(_diagnostic_row(f'{name}: frame available -> point, 48 px', values,
+                              'frame available -> image point',
+                              target_ms=TARGETS_MS['camera_detector'],
+                              count_key='timing samples'))
+    print(_row('shutter -> image point in the fuser callback', points))
+    p99 = f'  p99 {np.percentile(np.array(positions) * 1e3, 99):.3f}' if positions else ''
+    ok99 = bool(positions) and np.percentile(np.array(positions) * 1e3, 99) <= \
+        TARGETS_MS['shutter_to_position_p99']
+    print(_row('shutter -> /ball/position published', positions,
+               target_ms=TARGETS_MS['shutter_to_position'], baseline=hop if hop else None,
+               extra=p99 + (f' (<= {TARGETS_MS["shutter_to_position_p99"]:g} '
+                            f'{"ok" if ok99 else "OVER"})' if positions else '')))
+    print(_row('  baseline: bare PointStamped hop', hop))
+    wake = [float(v.get('shutter -> frame available p50 [ms]', 'nan'))
+            for v in result['diagnostics'].values()]
+    detect = [float(v.get('frame available -> image point p50 [ms]', 'nan'))
+              for v in result['diagnostics'].values()]
+    if positions and points and wake and detect:
+        wake_ms, detect_ms = float(np.mean(wake)), float(np.mean(detect))
+        point_ms, position_ms = _stats(points)[0], _stats(positions)[0]
+        print('where the time goes (medians, ms; they add up only roughly):')
+        for label, value in (
+                ('shutter -> frame available (capture thread wakes)', wake_ms),
+                ('detection + publish of the image point', detect_ms),
+                ("DDS hop to the fuser's callback (bare hop median "
+                 f'{_stats(hop)[0]:.3f})', point_ms - wake_ms - detect_ms),
+                ('fuser: point received -> position published', position_ms - point_ms),
+                ('total shutter -> /ball/position published', position_ms)):
+            print(f'  {label:<60s}{value:8.3f}')
+    if not positions:
+        print('  camera_detector: no /ball/position published (DDS discovery failed?)')
+        return 1
+    return 0
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the benchmarks and print the table; return the exit status."""
     parser = argparse.ArgumentParser(prog='bench_pipeline', description=__doc__.split('\n')[1])
@@ -460,6 +698,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         if not transport:
             print('  transport baseline: no image received by the probe process')
             status = 1
+        sys.stdout.flush()
+        status = max(status, print_camera_detector_rows(options.seconds))
     print(f'paper (other hardware): image analysis {PAPER_IMAGE_ANALYSIS_MS} ms, '
           f'capture to 3D {PAPER_CAPTURE_TO_3D_MS} ms; (+x ms): median minus baseline median')
     return status

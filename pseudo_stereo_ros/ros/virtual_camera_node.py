@@ -28,7 +28,6 @@ Each frame is rendered before its shutter time and published at it.
 import time
 
 from geometry_msgs.msg import PointStamped
-import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -37,10 +36,10 @@ from .messages import array_to_image, calibration_to_camera_info, estimate_to_po
 from .node_tools import declare, run_node, StartupError
 from ..calibration import load_calibration
 from ..camera import Camera
+from ..capture import VirtualSource
 from ..records import GroundTruth
 from ..rig import config_dir
-from ..sim.rendering import BallRenderer
-from ..sim.scenarios import make_scenario, SCENARIOS
+from ..sim.scenarios import SCENARIOS
 
 __all__ = ['VirtualCameraNode', 'main']
 
@@ -95,14 +94,17 @@ class VirtualCameraNode(Node):
         self.camera = Camera(self.calibration)
         if not self.frame_id:
             self.frame_id = f'{self.camera.name}_optical_frame'
-        self.scenario = make_scenario(scenario)
-        self.renderer = BallRenderer(self.camera, radius_m=radius_m, ball_rgb=rgb,
-                                     noise_std=noise, seed=seed)
-        self.period_ns = 1e9 / fps
-        self.phase_ns = int(round(phase_s * 1e9))
         if epoch_ns == 0:
             epoch_ns = self.get_clock().now().nanoseconds + 200_000_000
-        self.epoch_ns = int(epoch_ns)
+        # The renderer and shutter times of the camera_detector's virtual source: one
+        # implementation of the built-in camera.
+        self.source = VirtualSource(self.camera, scenario=scenario, fps=fps, phase_s=phase_s,
+                                    epoch_ns=epoch_ns, loop=self.loop, pause_s=self.pause_s,
+                                    radius_m=radius_m, ball_rgb=rgb, noise_std=noise,
+                                    seed=seed)
+        self.scenario = self.source.scenario
+        self.period_ns = self.source.period_ns
+        self.epoch_ns = self.source.epoch_ns
         #: Counts: ``frames`` published, ``skipped`` (late), ``ended`` (scenario over, no loop).
         self.stats = {'frames': 0, 'skipped': 0}
         self._next_index = 0
@@ -123,29 +125,20 @@ class VirtualCameraNode(Node):
 
     def stamp_of(self, index: int) -> int:
         """Return the shutter stamp [ns] of frame ``index``."""
-        return self.epoch_ns + self.phase_ns + int(round(index * self.period_ns))
-
-    def _scenario_time(self, stamp_ns: int) -> float:
-        seconds = (stamp_ns - self.epoch_ns) / 1e9
-        if self.loop:
-            return seconds % (self.scenario.duration_s + self.pause_s)
-        return seconds
+        return self.source.stamp_of(index)
 
     def _prepare(self, index: int) -> None:
         stamp = self.stamp_of(index)
-        seconds = self._scenario_time(stamp)
-        if seconds > self.scenario.duration_s:
-            if not self.loop:  # the scenario is over: no more frames
-                self._prepared = (index, None, None, None)
-                return
-            position = truth = None  # the pause between repetitions: frames without a ball
-        else:
-            position = self.scenario.position(np.array([seconds]))[0]
-            truth = estimate_to_point(
-                GroundTruth(stamp, *map(float, position)), 'world')
+        image, position = self.source.render(index)
+        if image is None:  # the scenario is over: no more frames
+            self._prepared = (index, None, None, None)
+            return
+        # No position: the pause between repetitions, a frame without a ball.
+        truth = (None if position is None
+                 else estimate_to_point(GroundTruth(stamp, *position), 'world'))
         self._prepared = (
             index,
-            array_to_image(self.renderer.render(position), 'bgr8', stamp, self.frame_id),
+            array_to_image(image, 'bgr8', stamp, self.frame_id),
             calibration_to_camera_info(self.calibration, stamp, self.frame_id),
             truth,
         )
