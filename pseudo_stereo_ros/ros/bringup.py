@@ -52,6 +52,7 @@ from .detector_node import DetectorNode
 from .fuser_node import FuserNode
 from .monitor_node import MonitorNode
 from .node_tools import init_context, STARTUP_ERRORS
+from ..errors import RigError
 from ..fusion import METHODS
 from ..rig import check_camera_name, config_dir
 from ..sim.scenarios import SCENARIOS
@@ -152,8 +153,11 @@ def camera_sources(options) -> List[dict]:
         raise ValueError('need at least two cameras (--cameras or --camera NAME=SPEC)')
     if len(set(names)) != len(names):
         raise ValueError(f'camera names must be unique, got {" ".join(names)}')
-    for name in names:
-        check_camera_name(name)  # before a node takes it as its namespace (a RigError)
+    try:
+        for name in names:
+            check_camera_name(name)  # before a node takes it as its namespace
+    except RigError as err:
+        raise RigError(f'--cameras: {err}') from err
     given = _pairs(options.camera, '--camera', names)
     calibrations = _pairs(options.calibration, '--calibration', names)
     fps = _numbers(options.fps, '--fps', names, positive=True)
