@@ -360,9 +360,15 @@ class Fuser:
     def _paper(self, view: _View, frame: _Frame, partner: _View):
         gate = self.gate
         partner_newest = partner.frames[-1]
-        if frame.stamp - partner_newest.stamp <= gate.sync_tolerance_ns:
+        if abs(frame.stamp - partner_newest.stamp) <= gate.sync_tolerance_ns:
             point = self._direct(view, frame, partner, partner_newest)
             return None if point is None else (point, 'sync')
+        if frame.stamp < partner_newest.stamp:
+            # A late frame with no partner frame before it (the partner's history starts after
+            # it, e.g. it resumed): no interpolation exists, and a prediction from later frames
+            # is no estimate of this instant.
+            self.stats['warming_up'] += 1
+            return None
 
         # Anchors: the two newest earlier frames of either camera at which a pseudo-stereo point
         # exists, more than the baseline floor apart (normally B's t'-1 and A's t-1): Eq. 3

@@ -439,3 +439,22 @@ def test_track_options_reach_the_fuser(tmp_path, capsys):
     assert 'workspace' in error and error.count('\n') == 1
     assert main(args + ['--max-speed', 'nan']) == 2
     assert '--max-speed' in capsys.readouterr().err
+
+
+def test_a_late_observation_before_the_partners_history_is_not_paired_with_a_later_frame():
+    # camera2 resumes (its history starts at t) after camera1's frame at t - 1/60 s has been
+    # delivered late: no camera2 frame is near that frame, so nothing may pair it with camera2's
+    # later frame as if simultaneous (that was a 1/60 s error, ~50 mm at 3 m/s).
+    cameras, run, observations = recording(1.0, 1 / 60, noise_px=0.0)
+    cam1 = [o for o in observations if o.camera == 'camera1']
+    cam2 = [o for o in observations if o.camera == 'camera2']
+    fuser = Fuser(cameras)
+    stream(fuser, cam1[:10])  # camera1 alone: no partner yet
+    late = cam1[10]
+    resumed = next(o for o in cam2 if o.stamp_ns > late.stamp_ns)
+    estimates = stream(fuser, [resumed, late] + [o for o in observations
+                                                if o.stamp_ns > resumed.stamp_ns])
+    assert estimates, 'the fuser recovered after the outage'
+    assert errors(estimates, run).max() < 0.01, [e for e in estimates
+                                                 if e.stamp_ns == late.stamp_ns]
+    assert counts_add_up(fuser)
