@@ -453,7 +453,7 @@ def test_a_late_observation_before_the_partners_history_is_not_paired_with_a_lat
     late = cam1[10]
     resumed = next(o for o in cam2 if o.stamp_ns > late.stamp_ns)
     estimates = stream(fuser, [resumed, late] + [o for o in observations
-                                                if o.stamp_ns > resumed.stamp_ns])
+                                                 if o.stamp_ns > resumed.stamp_ns])
     assert estimates, 'the fuser recovered after the outage'
     assert errors(estimates, run).max() < 0.01, [e for e in estimates
                                                  if e.stamp_ns == late.stamp_ns]
