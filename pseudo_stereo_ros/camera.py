@@ -24,10 +24,16 @@ result that does not exist (a point on or behind the camera plane, parallel
 rays) is NaN, never an exception; callers test with ``np.isfinite``.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import TypeAlias
+
 import cv2
 import numpy as np
 
 from .calibration import CameraCalibration, load_calibration, PathLike
+from .records import Point3
 
 __all__ = ['Camera']
 
@@ -35,17 +41,20 @@ __all__ = ['Camera']
 # distorted lenses (the real table-tennis rig has k3 = -7.7), so iterate to convergence.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
 
+# f(points (N, 1, 2) raw pixels, K, D) -> (N, 1, 2) normalized coordinates
+_Undistort: TypeAlias = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
-def _undistort_function():
+
+def _undistort_function() -> _Undistort:
     """Return f(points (N,1,2), K, D) -> normalized (N,1,2) for OpenCV 4.6 to 5."""
-    if hasattr(cv2, 'undistortPointsIter'):  # OpenCV 4.x
-        return lambda pts, k, d: cv2.undistortPointsIter(
-            pts, k, d, None, None, _UNDISTORT_CRITERIA)
+    iterative = getattr(cv2, 'undistortPointsIter', None)  # OpenCV 4.x
+    if iterative is not None:
+        return lambda pts, k, d: iterative(pts, k, d, None, None, _UNDISTORT_CRITERIA)
     return lambda pts, k, d: cv2.undistortPoints(pts, k, d, None, None,
                                                  criteria=_UNDISTORT_CRITERIA)
 
 
-def _fisheye_undistort(pts, k, d):
+def _fisheye_undistort(pts: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
     try:
         return cv2.fisheye.undistortPoints(pts, k, d, criteria=_UNDISTORT_CRITERIA)
     except TypeError:  # OpenCV < 4.7 has no criteria argument
@@ -53,6 +62,12 @@ def _fisheye_undistort(pts, k, d):
 
 
 _UNDISTORT = _undistort_function()
+
+
+def _point3(values: Iterable[float]) -> Point3:
+    """Return three numbers as a plain-float (x, y, z) tuple."""
+    x, y, z = values
+    return float(x), float(y), float(z)
 
 
 class Camera:
@@ -63,25 +78,27 @@ class Camera:
     :param name: the name the data uses for this camera (default: the file's ``camera_name``)
     """
 
-    def __init__(self, calibration: CameraCalibration, *, name: str = None):
+    def __init__(self, calibration: CameraCalibration, *, name: str | None = None) -> None:
         self.calibration = calibration
         self.name = calibration.camera_name if name is None else str(name)
         self.K = np.array(calibration.camera_matrix, dtype=float)
         self.D = np.array(calibration.dist_coeffs, dtype=float)
         self.R = np.array(calibration.rotation, dtype=float)
         self.t = np.array(calibration.translation, dtype=float)
-        self.image_size = (calibration.image_width, calibration.image_height)
+        self.image_size: tuple[int, int] = (calibration.image_width, calibration.image_height)
         self.fisheye = calibration.distortion_model == 'equidistant'
         #: Optical centre in the world frame, (3,) [m].
         self.center = -self.R.T @ self.t
         self._rvec = cv2.Rodrigues(self.R)[0]
-        self._undistort = _fisheye_undistort if self.fisheye else _UNDISTORT
+        self._undistort: _Undistort = _fisheye_undistort if self.fisheye else _UNDISTORT
         # Plain-float copies for the fuser's per-event path (numpy is slow on 3-vectors).
-        self.center_tuple = tuple(float(x) for x in self.center)
-        self.rotation_t_rows = tuple(tuple(float(x) for x in row) for row in self.R.T)
+        self.center_tuple: Point3 = _point3(self.center)
+        r_t = self.R.T
+        self.rotation_t_rows: tuple[Point3, Point3, Point3] = (
+            _point3(r_t[0]), _point3(r_t[1]), _point3(r_t[2]))
 
     @classmethod
-    def from_file(cls, path: PathLike, *, name: str = None) -> 'Camera':
+    def from_file(cls, path: PathLike, *, name: str | None = None) -> Camera:
         """Load a camera from its calibration YAML file (optionally under another name)."""
         return cls(load_calibration(path), name=name)
 
@@ -130,7 +147,7 @@ class Camera:
             return np.empty((0, 2))
         return self._undistort(pixels, self.K, self.D).reshape(-1, 2)
 
-    def normalize_one(self, u: float, v: float) -> tuple:
+    def normalize_one(self, u: float, v: float) -> tuple[float, float]:
         """Undistort one raw pixel to a normalized (x, y) pair of floats."""
         xy = self._undistort(np.array(((u, v),), dtype=float).reshape(1, 1, 2), self.K, self.D)
         return float(xy[0, 0, 0]), float(xy[0, 0, 1])
@@ -160,7 +177,7 @@ class Camera:
         homogeneous = np.hstack((normalized, np.ones((len(normalized), 1))))
         return homogeneous @ self.R
 
-    def rays(self, pixels: np.ndarray) -> tuple:
+    def rays(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """
         Return the viewing rays of raw pixels.
 
@@ -169,7 +186,7 @@ class Camera:
         """
         return self.center, self.ray_directions(self.normalize(pixels))
 
-    def direction_of(self, x: float, y: float) -> tuple:
+    def direction_of(self, x: float, y: float) -> Point3:
         """Return the world direction (3 floats) of one normalized point; per-event fast path."""
         r0, r1, r2 = self.rotation_t_rows
         return (r0[0] * x + r0[1] * y + r0[2],

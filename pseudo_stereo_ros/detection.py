@@ -34,8 +34,11 @@ centres at integers.
 :meth:`BallDetector.detect` takes; it knows no ROS type.
 """
 
+from __future__ import annotations
+
+import array
 from collections import Counter
-from typing import Optional, Sequence, Tuple
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -62,7 +65,8 @@ ENCODING_CHANNELS = {'mono8': 1, 'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4}
 _MARGIN_PX = 2
 
 
-def image_array(data, height: int, width: int, step: int, encoding: str) -> np.ndarray:
+def image_array(data: bytes | bytearray | memoryview | array.array[int] | np.ndarray,
+                height: int, width: int, step: int, encoding: str) -> np.ndarray:
     """
     Return the pixels of a raw 8-bit image buffer as an array (a view where possible).
 
@@ -120,7 +124,7 @@ class BallDetector:
                  hsv_upper: Sequence[int] = (25, 255, 255), mono_threshold: int = 200,
                  min_area_px: float = 4.0, max_area_px: float = 20000.0,
                  open_kernel_px: int = 3, choice: str = 'largest',
-                 search_window_px: int = 48):
+                 search_window_px: int = 48) -> None:
         lower = [int(x) for x in hsv_lower]
         upper = [int(x) for x in hsv_upper]
         if len(lower) != 3 or len(upper) != 3:
@@ -140,7 +144,8 @@ class BallDetector:
             raise DetectorConfigError(f'unknown choice {choice!r} (known: {", ".join(CHOICES)})')
         if int(search_window_px) < 0 or int(open_kernel_px) < 0:
             raise DetectorConfigError('search_window_px and open_kernel_px must be >= 0')
-        self._ranges = []
+        # (lower, upper) HSV bounds; two when the hue range wraps around red
+        self._ranges: list[tuple[np.ndarray, np.ndarray]] = []
         if lower[0] <= upper[0]:
             self._ranges.append((np.array(lower, np.uint8), np.array(upper, np.uint8)))
         else:  # hue wraps around 180
@@ -160,15 +165,15 @@ class BallDetector:
                                                  (2 * _MARGIN_PX + 1, 2 * _MARGIN_PX + 1))
         self._ring_kernel = np.ones((3, 3), np.uint8)
         #: The last detection (u, v) [px], or None.
-        self.last: Optional[Tuple[float, float]] = None
+        self.last: tuple[float, float] | None = None
         #: Counts: ``frames``, ``detections``, ``no_ball``, ``window_hits``, ``window_misses``.
-        self.stats = Counter()
+        self.stats: Counter[str] = Counter()
 
     def reset(self) -> None:
         """Forget the last position."""
         self.last = None
 
-    def detect(self, image: np.ndarray, encoding: str = 'bgr8') -> Optional[Tuple[float, float]]:
+    def detect(self, image: np.ndarray, encoding: str = 'bgr8') -> tuple[float, float] | None:
         """
         Find the ball.
 
@@ -218,14 +223,14 @@ class BallDetector:
         # The conversion reads 3 or 4 channels and strided views (a search window) as they
         # are: no copy of the frame.
         hsv = cv2.cvtColor(image, COLOR_ENCODINGS[encoding])
-        mask = None
-        for lower, upper in self._ranges:
-            part = cv2.inRange(hsv, lower, upper)
-            mask = part if mask is None else cv2.bitwise_or(mask, part)
+        (lower, upper), *more = self._ranges
+        mask = cv2.inRange(hsv, lower, upper)
+        for lower, upper in more:
+            mask = cv2.bitwise_or(mask, cv2.inRange(hsv, lower, upper))
         return mask
 
-    def _search(self, image: np.ndarray, encoding: str, offset: Tuple[int, int],
-                inner_edges: Tuple[bool, bool, bool, bool]) -> Optional[Tuple[float, float]]:
+    def _search(self, image: np.ndarray, encoding: str, offset: tuple[int, int],
+                inner_edges: tuple[bool, bool, bool, bool]) -> tuple[float, float] | None:
         """Detect in ``image`` (a view of the frame at ``offset``); None if no acceptable blob."""
         mask = self._mask(image, encoding)
         if self._kernel is not None:
@@ -252,14 +257,16 @@ class BallDetector:
             return None
         x0, y0 = max(left - _MARGIN_PX, 0), max(top - _MARGIN_PX, 0)
         x1, y1 = min(left + w + _MARGIN_PX, width), min(top + h + _MARGIN_PX, height)
-        u, v = self._centroid(image[y0:y1, x0:x1], labels[y0:y1, x0:x1] == best)
-        if u is None:
+        centroid = self._centroid(image[y0:y1, x0:x1], labels[y0:y1, x0:x1] == best)
+        if centroid is None:
             u, v = centroids[best]
             u, v = u - x0, v - y0
+        else:
+            u, v = centroid
         return float(u + x0 + offset[0]), float(v + y0 + offset[1])
 
-    def _centroid(self, patch: np.ndarray, blob: np.ndarray) -> tuple:
-        """Soft-weighted centroid within ``patch`` (coordinates relative to the patch)."""
+    def _centroid(self, patch: np.ndarray, blob: np.ndarray) -> tuple[float, float] | None:
+        """Soft-weighted centroid within ``patch`` (relative to the patch); None if no weight."""
         if patch.ndim == 2:
             signal = patch.astype(np.float32)
         else:
@@ -274,5 +281,5 @@ class BallDetector:
         weight = np.where(near, np.clip(signal - level, 0.0, None), 0.0).astype(np.float32)
         moments = cv2.moments(weight)
         if moments['m00'] <= 0:
-            return None, None
+            return None
         return moments['m10'] / moments['m00'], moments['m01'] / moments['m00']

@@ -26,11 +26,12 @@ crossing point.  The vectorized functions return NaN rows for it, the
 ``*_one`` functions None (cheaper to test per event than NaN).
 """
 
-from typing import Optional
+from __future__ import annotations
 
 import numpy as np
 
 from .camera import Camera
+from .records import Point3
 
 __all__ = [
     'PARALLEL_EPS',
@@ -50,7 +51,7 @@ __all__ = [
 PARALLEL_EPS = 1e-12
 
 
-def relative_pose(cam_a: Camera, cam_b: Camera) -> tuple:
+def relative_pose(cam_a: Camera, cam_b: Camera) -> tuple[np.ndarray, np.ndarray]:
     """
     Return (R_ab, t_ab) with ``x_b = R_ab @ x_a + t_ab`` between the two camera frames.
 
@@ -182,7 +183,7 @@ def nearest_point_on_line(points: np.ndarray, origin: np.ndarray,
     return origin + k[:, None] * directions
 
 
-def triangulate_rays_one(o1: tuple, d1: tuple, o2: tuple, d2: tuple) -> Optional[tuple]:
+def triangulate_rays_one(o1: Point3, d1: Point3, o2: Point3, d2: Point3) -> Point3 | None:
     """
     Return the crossing point of one pair of rays (scalar :func:`triangulate_rays`).
 
@@ -210,7 +211,7 @@ def triangulate_rays_one(o1: tuple, d1: tuple, o2: tuple, d2: tuple) -> Optional
             0.5 * (o1[2] + s * d1[2] + o2[2] + t * d2[2]))
 
 
-def nearest_point_on_line_one(point: tuple, origin: tuple, direction: tuple) -> tuple:
+def nearest_point_on_line_one(point: Point3, origin: Point3, direction: Point3) -> Point3:
     """
     Return the nearest point on one line to a point (scalar :func:`nearest_point_on_line`).
 

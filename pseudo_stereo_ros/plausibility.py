@@ -42,12 +42,15 @@ wrong seed costs at most one correct estimate, and a real jump two.
 This module is ROS-free.
 """
 
+from __future__ import annotations
+
 from collections import Counter
+from collections.abc import Iterable, Sequence
 import math
 import numbers
-from typing import Optional, Sequence
 
 from .errors import FuserConfigError
+from .records import Point3
 
 __all__ = ['DEFAULT_MAX_SPEED_MPS', 'MIN_SPEED_INTERVAL_NS', 'PlausibilityGate']
 
@@ -60,18 +63,18 @@ _RUN_AGAINST_SEED = 2
 _RUN_AGAINST_TRACK = 3
 
 
-def _bound(name: str, values, default: float) -> tuple:
+def _bound(name: str, values: Iterable[float] | None, default: float) -> Point3:
     """Return a validated (x, y, z) bound [m]."""
     if values is None:
-        return (default,) * 3
+        return (default, default, default)
     try:
-        values = tuple(float(v) for v in values)
+        floats = tuple(float(v) for v in values)
     except (TypeError, ValueError) as err:
         raise FuserConfigError(f'{name} must be three numbers (x, y, z) [m], got {values!r}') \
             from err
-    if len(values) != 3 or any(math.isnan(v) for v in values):
-        raise FuserConfigError(f'{name} must be three numbers (x, y, z) [m], got {values!r}')
-    return values
+    if len(floats) != 3 or any(math.isnan(v) for v in floats):
+        raise FuserConfigError(f'{name} must be three numbers (x, y, z) [m], got {floats!r}')
+    return floats[0], floats[1], floats[2]
 
 
 class PlausibilityGate:
@@ -87,10 +90,10 @@ class PlausibilityGate:
     :raises FuserConfigError: an invalid option, naming it
     """
 
-    def __init__(self, *, max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
-                 workspace_min_m: Optional[Sequence[float]] = None,
-                 workspace_max_m: Optional[Sequence[float]] = None,
-                 window_ns: int = 100_000_000, stats: Optional[Counter] = None):
+    def __init__(self, *, max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Sequence[float] | None = None,
+                 workspace_max_m: Sequence[float] | None = None,
+                 window_ns: int = 100_000_000, stats: Counter[str] | None = None) -> None:
         if max_speed_mps is None:
             max_speed_mps = 0.0
         if isinstance(max_speed_mps, bool) or not isinstance(max_speed_mps, numbers.Real) \
@@ -99,27 +102,31 @@ class PlausibilityGate:
                                    f'{max_speed_mps!r}')
         #: Fastest plausible speed [m/s]; 0 when the speed test is off.
         self.max_speed_mps = float(max_speed_mps)
-        self._speed = self.max_speed_mps * 1e-9 if 0 < self.max_speed_mps < math.inf else None
-        self.workspace_min_m = _bound('workspace_min_m', workspace_min_m, -math.inf)
-        self.workspace_max_m = _bound('workspace_max_m', workspace_max_m, math.inf)
+        # Reach per ns of elapsed time [m/ns]; None when the speed test is off.
+        self._speed: float | None = (self.max_speed_mps * 1e-9
+                                     if 0 < self.max_speed_mps < math.inf else None)
+        self.workspace_min_m: Point3 = _bound('workspace_min_m', workspace_min_m, -math.inf)
+        self.workspace_max_m: Point3 = _bound('workspace_max_m', workspace_max_m, math.inf)
         for axis, low, high in zip('xyz', self.workspace_min_m, self.workspace_max_m):
             if not low < high:
                 raise FuserConfigError(f'workspace_min_m must be below workspace_max_m on every '
                                        f'axis, got {low} >= {high} on {axis}')
-        self._box = any(math.isfinite(v) for v in self.workspace_min_m + self.workspace_max_m)
-        self.window_ns = int(window_ns)
-        self.stats = Counter() if stats is None else stats
-        self._accepted = None  # (stamp, point, corroborated) of the last accepted estimate
+        corners = self.workspace_min_m + self.workspace_max_m
+        self._box: bool = any(math.isfinite(v) for v in corners)
+        self.window_ns: int = int(window_ns)
+        self.stats: Counter[str] = Counter() if stats is None else stats
+        # (stamp, point, corroborated) of the last accepted estimate
+        self._accepted: tuple[int, Point3, bool] | None = None
         # (stamp, point) of the last consecutive estimates rejected by the speed test that agree
         # with each other
-        self._rejected = []
+        self._rejected: list[tuple[int, Point3]] = []
 
     def reset(self) -> None:
         """Forget the accepted and rejected estimates (a new session)."""
         self._accepted = None
         self._rejected = []
 
-    def accept(self, stamp_ns: int, point: Sequence[float]) -> bool:
+    def accept(self, stamp_ns: int, point: Point3) -> bool:
         """
         Tell whether an estimate is plausible; count ``implausible`` when it is not.
 
@@ -133,7 +140,8 @@ class PlausibilityGate:
                     and low[2] <= point[2] <= high[2]):
                 self.stats['implausible'] += 1
                 return False
-        if self._speed is None:
+        speed = self._speed
+        if speed is None:
             return True
         accepted = self._accepted
         if accepted is None or abs(stamp_ns - accepted[0]) > self.window_ns:
@@ -141,7 +149,7 @@ class PlausibilityGate:
             self._rejected.clear()
             return True
         # The common case, inline: within the speed bound of the accepted estimate.
-        reach = self._speed * max(abs(stamp_ns - accepted[0]), MIN_SPEED_INTERVAL_NS)
+        reach = speed * max(abs(stamp_ns - accepted[0]), MIN_SPEED_INTERVAL_NS)
         other = accepted[1]
         dx, dy, dz = point[0] - other[0], point[1] - other[1], point[2] - other[2]
         if dx * dx + dy * dy + dz * dz <= reach * reach:
@@ -150,7 +158,7 @@ class PlausibilityGate:
                 self._rejected.clear()
             return True
         rejected = self._rejected
-        if rejected and not self._near(rejected[-1], stamp_ns, point):
+        if rejected and not self._near(rejected[-1], stamp_ns, point, speed):
             rejected.clear()  # not a consistent run: start a new one
         rejected.append((stamp_ns, point))
         if len(rejected) >= (_RUN_AGAINST_TRACK if accepted[2] else _RUN_AGAINST_SEED):
@@ -162,12 +170,13 @@ class PlausibilityGate:
         self.stats['implausible'] += 1
         return False
 
-    def _near(self, reference: tuple, stamp_ns: int, point: Sequence[float]) -> bool:
-        """Return True when point is within the speed bound of a recent reference."""
+    def _near(self, reference: tuple[int, Point3], stamp_ns: int, point: Point3,
+              speed: float) -> bool:
+        """Return True when point is within the speed bound (``speed`` [m/ns]) of a reference."""
         dt = abs(stamp_ns - reference[0])
         if dt > self.window_ns:
             return False
-        reach = self._speed * max(dt, MIN_SPEED_INTERVAL_NS)
+        reach = speed * max(dt, MIN_SPEED_INTERVAL_NS)
         other = reference[1]
         dx, dy, dz = point[0] - other[0], point[1] - other[1], point[2] - other[2]
         return dx * dx + dy * dy + dz * dz <= reach * reach

@@ -22,7 +22,8 @@ ROS-free: every part of the package (core, formats, nodes) exchanges these.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence, Tuple, Union
+from collections.abc import Sequence
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 
@@ -35,7 +36,7 @@ __all__ = [
 ]
 
 #: A 3D point or direction as plain floats (x, y, z) [m].
-Point3 = Tuple[float, float, float]
+Point3: TypeAlias = tuple[float, float, float]
 
 
 class Observation(NamedTuple):
@@ -75,6 +76,6 @@ class GroundTruth(NamedTuple):
     z: float
 
 
-def positions_array(records: Sequence[Union[Estimate, GroundTruth]]) -> np.ndarray:
+def positions_array(records: Sequence[Estimate | GroundTruth]) -> np.ndarray:
     """Return the (N, 3) positions [m] of a list of estimates or truth records."""
     return np.array([(r.x, r.y, r.z) for r in records], dtype=float).reshape(-1, 3)

@@ -25,9 +25,12 @@ than one already released is passed through at once and counted as
 caller's clock, so this is tested without a ROS graph.
 """
 
+from __future__ import annotations
+
 from collections import Counter
+from collections.abc import Iterable
 import heapq
-from typing import Any, Iterable, List, Optional
+from typing import Any
 
 __all__ = ['ReorderBuffer']
 
@@ -42,32 +45,34 @@ class ReorderBuffer:
     :param max_items: hold at most this many items; the oldest is released beyond that
     """
 
-    def __init__(self, window_ns: int, *, sources: Optional[Iterable[str]] = None,
-                 max_items: int = 1000):
+    def __init__(self, window_ns: int, *, sources: Iterable[str] | None = None,
+                 max_items: int = 1000) -> None:
         if window_ns < 0:
             raise ValueError(f'window_ns must be >= 0, got {window_ns}')
         if max_items < 1:
             raise ValueError(f'max_items must be >= 1, got {max_items}')
         self.window_ns = int(window_ns)
         self.max_items = int(max_items)
-        self._latest = dict.fromkeys(sources or ())
-        self._heap = []
+        # source -> its newest stamp [ns] (None before its first item)
+        self._latest: dict[str, int | None] = dict.fromkeys(sources or ())
+        # (stamp [ns], arrival sequence, arrival time [ns], item)
+        self._heap: list[tuple[int, int, int, Any]] = []
         self._sequence = 0
-        self._released_ns = None
+        self._released_ns: int | None = None
         #: Counts: ``items``, ``released``, ``late`` (older than a released item), ``overflow``.
-        self.stats = Counter()
+        self.stats: Counter[str] = Counter()
 
     def __len__(self) -> int:
         """Return the number of items held."""
         return len(self._heap)
 
-    def next_due_ns(self) -> Optional[int]:
+    def next_due_ns(self) -> int | None:
         """Return the arrival-clock time [ns] when the oldest held item is due, or None."""
         if not self._heap:
             return None
         return min(entry[2] for entry in self._heap) + self.window_ns
 
-    def push(self, stamp_ns: int, source: str, item: Any, now_ns: int) -> List[Any]:
+    def push(self, stamp_ns: int, source: str, item: Any, now_ns: int) -> list[Any]:
         """
         Add one item and return the items now released, in stamp order.
 
@@ -95,9 +100,9 @@ class ReorderBuffer:
         self._sequence += 1
         return self.pop_due(now_ns)
 
-    def pop_due(self, now_ns: int) -> List[Any]:
+    def pop_due(self, now_ns: int) -> list[Any]:
         """Return the items due at ``now_ns`` (arrival clock) or safe, in stamp order."""
-        released = []
+        released: list[Any] = []
         heap = self._heap
         horizon = self._safe_horizon()
         while heap:
@@ -114,9 +119,9 @@ class ReorderBuffer:
         self.stats['released'] += len(released)
         return released
 
-    def flush(self) -> List[Any]:
+    def flush(self) -> list[Any]:
         """Release everything held, in stamp order."""
-        released = []
+        released: list[Any] = []
         while self._heap:
             stamp, _, _, item = heapq.heappop(self._heap)
             self._released_ns = stamp
@@ -124,11 +129,11 @@ class ReorderBuffer:
         self.stats['released'] += len(released)
         return released
 
-    def _safe_horizon(self) -> Optional[int]:
+    def _safe_horizon(self) -> int | None:
         """Return the stamp up to which every source has delivered, or None if one has not."""
         if len(self._latest) < 2:
             return None
-        latest = self._latest.values()
-        if any(stamp is None for stamp in latest):
+        latest = [stamp for stamp in self._latest.values() if stamp is not None]
+        if len(latest) < len(self._latest):
             return None
         return min(latest)

@@ -115,7 +115,7 @@ class Rig(Mapping[str, Camera]):
     list of cameras in that order.
     """
 
-    def __init__(self, cameras: Sequence[Camera], *, minimum: int = 1):
+    def __init__(self, cameras: Sequence[Camera], *, minimum: int = 1) -> None:
         """
         Make a rig of calibrated cameras.
 

@@ -24,7 +24,9 @@ their own ``Time`` class; stamps never go through float seconds (a stamp
 near 1.7e18 ns loses ~200 ns as a float).  ROS-free: stdlib only.
 """
 
-from typing import Dict, Tuple
+from __future__ import annotations
+
+from typing import Protocol
 
 __all__ = ['BAG_STAMP_MAX_NS', 'NS_PER_S', 'ns_to_sec_nanosec', 'sec_nanosec_to_ns',
            'seconds_to_ns', 'stamp_fields', 'stamp_ns']
@@ -47,7 +49,7 @@ def seconds_to_ns(seconds: float) -> int:
     return int(round(seconds * NS_PER_S))
 
 
-def ns_to_sec_nanosec(stamp_ns: int) -> Tuple[int, int]:
+def ns_to_sec_nanosec(stamp_ns: int) -> tuple[int, int]:
     """
     Split a stamp into ``(sec, nanosec)``.
 
@@ -62,7 +64,7 @@ def sec_nanosec_to_ns(sec: int, nanosec: int) -> int:
     return int(sec) * NS_PER_S + int(nanosec)
 
 
-def stamp_fields(stamp_ns: int) -> Dict[str, int]:
+def stamp_fields(stamp_ns: int) -> dict[str, int]:
     """
     Return the keyword arguments of a ``builtin_interfaces/msg/Time`` for a stamp.
 
@@ -74,7 +76,17 @@ def stamp_fields(stamp_ns: int) -> Dict[str, int]:
     return {'sec': sec, 'nanosec': nanosec}
 
 
-def stamp_ns(stamp) -> int:
+class _Stamp(Protocol):
+    """Anything with the fields of a ``builtin_interfaces/msg/Time`` (rclpy or rosbags)."""
+
+    @property
+    def sec(self) -> int: ...
+
+    @property
+    def nanosec(self) -> int: ...
+
+
+def stamp_ns(stamp: _Stamp) -> int:
     """
     Return a ``builtin_interfaces/msg/Time`` as integer nanoseconds.
 

@@ -97,11 +97,14 @@ Use from an estimator (as :class:`~pseudo_stereo_ros.fusion.Fuser` does)::
 This module is ROS-free; its clock is the stamps only.
 """
 
+from __future__ import annotations
+
 from collections import Counter, deque
+from collections.abc import Mapping, Sequence
 import math
 import numbers
 import operator
-from typing import Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 
@@ -158,6 +161,9 @@ _PERIOD_WINDOW = 16
 _CONFIRM_FRAMES = 3
 _INT64 = (-2 ** 63, 2 ** 63)
 
+# A validated observation and its normalized coordinates (x, y), as the gate keeps it.
+_Item: TypeAlias = tuple[Observation, float, float]
+
 
 class Admitted(NamedTuple):
     """
@@ -188,7 +194,7 @@ class Admission(NamedTuple):
     """
 
     new_session: bool
-    ready: Tuple[Admitted, ...]
+    ready: tuple[Admitted, ...]
 
 
 _NOTHING = Admission(False, ())
@@ -208,12 +214,12 @@ class InputGate:
     :raises FuserConfigError: an invalid option, naming it
     """
 
-    def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
-                 sync_tolerance_ns: Optional[int] = None, max_gap_ns: Optional[int] = None,
-                 image_margin: Optional[float] = None, stats: Optional[Counter] = None):
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
+                 sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,
+                 image_margin: float | None = None, stats: Counter[str] | None = None) -> None:
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
-        self._cameras: Dict[str, Camera] = {camera.name: camera for camera in cameras}
+        self._cameras: dict[str, Camera] = {camera.name: camera for camera in cameras}
         tolerance = DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None else sync_tolerance_ns
         gap = DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns
         margin = DEFAULT_IMAGE_MARGIN if image_margin is None else image_margin
@@ -238,33 +244,34 @@ class InputGate:
         #: The margin around the image, a fraction of its width and height.
         self.image_margin = float(margin)
         # name -> (u_min, u_max, v_min, v_max) [px]
-        self._bounds = {}
+        self._bounds: dict[str, tuple[float, float, float, float]] = {}
         for name, camera in self._cameras.items():
             width, height = camera.image_size
             du, dv = self.image_margin * width, self.image_margin * height
             self._bounds[name] = (-du, width - 1 + du, -dv, height - 1 + dv)
         #: Counts: ``observations``, ``resets`` and one key per drop reason of
         #: :data:`INPUT_DROP_REASONS` (shared with the estimator when given).
-        self.stats = Counter() if stats is None else stats
+        self.stats: Counter[str] = Counter() if stats is None else stats
         #: Incremented at every new session (a jump agreed by the cameras, or a pause).
-        self.session = 0
-        self._intervals = {name: deque(maxlen=_PERIOD_WINDOW) for name in self._cameras}
-        self._period: Dict[str, Optional[int]] = dict.fromkeys(self._cameras)
-        self._since_estimate = dict.fromkeys(self._cameras, 0)
+        self.session: int = 0
+        self._intervals: dict[str, deque[int]] = {
+            name: deque(maxlen=_PERIOD_WINDOW) for name in self._cameras}
+        self._period: dict[str, int | None] = dict.fromkeys(self._cameras)
+        self._since_estimate: dict[str, int] = dict.fromkeys(self._cameras, 0)
         #: Camera name -> its max gap [ns] (read-only for estimators; see :meth:`max_gap_for`).
-        self.max_gaps: Dict[str, int] = dict.fromkeys(self._cameras, self.max_gap_ns)
-        self._gap = self.max_gaps
-        self._tolerance = self.max_sync_tolerance_ns
-        self._floor = max(self._tolerance, MIN_FRAME_INTERVAL_NS)
-        self._rig_gap = self.max_gap_ns
-        self._last: Dict[str, int] = {}
-        self._newest: Optional[int] = None
-        self._held: List[tuple] = []  # (observation, x, y) of one camera, stamp order
+        self.max_gaps: dict[str, int] = dict.fromkeys(self._cameras, self.max_gap_ns)
+        self._gap: dict[str, int] = self.max_gaps
+        self._tolerance: int = self.max_sync_tolerance_ns
+        self._floor: int = max(self._tolerance, MIN_FRAME_INTERVAL_NS)
+        self._rig_gap: int = self.max_gap_ns
+        self._last: dict[str, int] = {}
+        self._newest: int | None = None
+        self._held: list[_Item] = []  # observations of one camera, stamp order
 
     # -- what the estimator asks ----------------------------------------------------------------
 
     @property
-    def camera_names(self) -> List[str]:
+    def camera_names(self) -> list[str]:
         """Return the configured camera names, in order."""
         return list(self._cameras)
 
@@ -288,7 +295,7 @@ class InputGate:
         """Return the number of observations held until a jump is confirmed or refuted."""
         return len(self._held)
 
-    def period_ns(self, camera: str) -> Optional[int]:
+    def period_ns(self, camera: str) -> int | None:
         """Return the camera's measured frame period [ns], or None before it is known."""
         return self._period[camera]
 
@@ -296,7 +303,7 @@ class InputGate:
         """Return the camera's max gap [ns]: min(max_gap_ns, GAP_PERIODS periods)."""
         return self._gap[camera]
 
-    def off_timeline(self, stamp_ns) -> bool:
+    def off_timeline(self, stamp_ns: object) -> bool:
         """
         Tell whether a stamp is farther than :attr:`rig_gap_ns` from the session's timeline.
 
@@ -347,10 +354,11 @@ class InputGate:
             stats['bad_stamp'] += 1
             return _NOTHING
         if type(u) is not float or type(v) is not float:
-            reason, u, v = _pixel_values(u, v)
-            if reason is not None:
-                stats[reason] += 1
+            pixel = _pixel_values(u, v)
+            if isinstance(pixel, str):
+                stats[pixel] += 1
                 return _NOTHING
+            u, v = pixel
             converted = True
         elif not (math.isfinite(u) and math.isfinite(v)):
             stats['non_finite'] += 1
@@ -364,7 +372,7 @@ class InputGate:
             return _NOTHING
         if converted or type(observation) is not Observation:
             observation = Observation(camera, stamp, u, v)
-        item = (observation, x, y)
+        item: _Item = (observation, x, y)
 
         newest = self._newest
         if self._held:
@@ -400,12 +408,14 @@ class InputGate:
 
     # -- internals ------------------------------------------------------------------------------
 
-    def _decide(self, item: tuple) -> Admission:
+    def _decide(self, item: _Item) -> Admission:
         """Decide held observations with the next valid one (see the module rules)."""
         held = self._held
+        newest = self._newest
+        assert newest is not None, 'observations are held only away from a timeline'
         camera, stamp = item[0].camera, item[0].stamp_ns
         held_camera, held_stamp = held[-1][0].camera, held[-1][0].stamp_ns
-        if abs(stamp - self._newest) <= self._rig_gap:
+        if abs(stamp - newest) <= self._rig_gap:
             # The old timeline goes on: the held stamps were one camera's outliers.
             self.flush()
             admitted = self._accept(item)
@@ -425,20 +435,20 @@ class InputGate:
         held.append(item)
         return _NOTHING
 
-    def _new_session(self, items: List[tuple]) -> Admission:
+    def _new_session(self, items: list[_Item]) -> Admission:
         self._held.clear()
         self._last.clear()
         self._newest = None
         self.session += 1
         self.stats['resets'] += 1
-        ready = []
+        ready: list[Admitted] = []
         for item in items:
             admitted = self._accept(item)
             if admitted is not None:
                 ready.append(admitted)
         return Admission(True, tuple(ready))
 
-    def _accept(self, item: tuple) -> Optional[Admitted]:
+    def _accept(self, item: _Item) -> Admitted | None:
         """Admit an observation on the current timeline (or drop a duplicate)."""
         observation, x, y = item
         camera, stamp = observation.camera, observation.stamp_ns
@@ -493,17 +503,17 @@ class InputGate:
         self._rig_gap = max(self._gap.values())
 
 
-def _pixel_values(u, v) -> tuple:
-    """Return ``(reason, u, v)``: a drop reason or None, and the pixel as floats."""
+def _pixel_values(u: object, v: object) -> tuple[float, float] | str:
+    """Return the pixel ``(u, v)`` as finite floats, or the drop reason."""
     values = []
     for value in (u, v):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-            return 'bad_pixel', u, v
+            return 'bad_pixel'
         try:
-            value = float(value)
+            number = float(value)
         except (OverflowError, ValueError, TypeError):
-            return 'non_finite', u, v
-        if not math.isfinite(value):
-            return 'non_finite', u, v
-        values.append(value)
-    return None, values[0], values[1]
+            return 'non_finite'
+        if not math.isfinite(number):
+            return 'non_finite'
+        values.append(number)
+    return values[0], values[1]

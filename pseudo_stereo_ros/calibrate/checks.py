@@ -21,12 +21,16 @@ Every fit (:mod:`.intrinsics`, :mod:`.extrinsics`, :mod:`.full`) returns a
 Pixels are raw (distorted) pixels, world points metres.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 import math
-from typing import Optional, Sequence, Tuple
+from typing import Any, TypeAlias
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..calibration import CameraCalibration
 from ..errors import CalibrationFitError
@@ -43,6 +47,7 @@ __all__ = [
     'DUPLICATE_PX',
     'DUPLICATE_RATIO',
     'LM_CRITERIA',
+    'LineNumbers',
     'MAX_CENTRE_STD_RATIO',
     'MAX_MEDIAN_RESIDUAL_PX',
     'OUTLIER_MIN_PX',
@@ -104,6 +109,9 @@ MAX_CENTRE_STD_RATIO = 0.1
 
 LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 
+#: The (N,) CSV line of each correspondence, for error messages.
+LineNumbers: TypeAlias = Sequence[int] | np.ndarray
+
 
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
@@ -127,13 +135,13 @@ class CalibrationResult:
     outliers: np.ndarray
     outlier_threshold_px: float
     rms_px: float
-    world: Optional[np.ndarray] = None
-    image_labels: Tuple[str, ...] = ()
-    image_rms_px: Optional[np.ndarray] = None
-    point_image: Optional[np.ndarray] = None
+    world: np.ndarray | None = None
+    image_labels: tuple[str, ...] = ()
+    image_rms_px: np.ndarray | None = None
+    point_image: np.ndarray | None = None
     dist_terms: int = 0
-    notes: Tuple[str, ...] = field(default=())
-    intrinsics_std: Optional[np.ndarray] = None
+    notes: tuple[str, ...] = field(default=())
+    intrinsics_std: np.ndarray | None = None
 
     def summary(self) -> str:
         """Return a short multi-line description: RMS, intrinsics, pose, outliers."""
@@ -163,7 +171,7 @@ class CalibrationResult:
 # -- shared checks ------------------------------------------------------------------------------
 
 
-def flag_outliers(residuals_px: np.ndarray) -> Tuple[np.ndarray, float]:
+def flag_outliers(residuals_px: ArrayLike) -> tuple[np.ndarray, float]:
     """
     Flag residuals far beyond the robust noise level.
 
@@ -177,7 +185,7 @@ def flag_outliers(residuals_px: np.ndarray) -> Tuple[np.ndarray, float]:
     return residuals_px > threshold, threshold
 
 
-def _as_points(values, columns: int, what: str) -> np.ndarray:
+def _as_points(values: ArrayLike, columns: int, what: str) -> np.ndarray:
     try:
         array = np.array(values, dtype=float)
     except (TypeError, ValueError) as err:
@@ -196,18 +204,18 @@ def point_spread(points: np.ndarray) -> np.ndarray:
     return np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
 
 
-def _repeats(points: np.ndarray, tolerance: float) -> Tuple[int, dict]:
+def _repeats(points: np.ndarray, tolerance: float) -> tuple[int, dict[int, list[int]]]:
     """Return the number of distinct points and, per first occurrence, the indices repeating it."""
     keys = np.round(points / tolerance) + 0.0  # + 0.0 turns -0.0 into 0.0
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     owner = first[np.asarray(inverse).ravel()]
-    groups = {}
+    groups: dict[int, list[int]] = {}
     for index in np.flatnonzero(owner != np.arange(len(points))):
         groups.setdefault(int(owner[index]), []).append(int(index))
     return len(first), groups
 
 
-def _describe_repeats(groups: dict, lines: Optional[Sequence[int]]) -> str:
+def _describe_repeats(groups: dict[int, list[int]], lines: LineNumbers | None) -> str:
     """Return e.g. ``lines 3, 4 repeat line 2; line 6 repeats line 5``."""
     word = 'line' if lines is not None else 'point'
     label = (lambda i: str(int(lines[i]))) if lines is not None else str
@@ -219,9 +227,8 @@ def _describe_repeats(groups: dict, lines: Optional[Sequence[int]]) -> str:
     return '; '.join(parts)
 
 
-def check_correspondences(world, pixels, minimum: int,
-                          lines: Optional[Sequence[int]] = None
-                          ) -> Tuple[np.ndarray, np.ndarray]:
+def check_correspondences(world: ArrayLike, pixels: ArrayLike, minimum: int,
+                          lines: LineNumbers | None = None) -> tuple[np.ndarray, np.ndarray]:
     world = _as_points(world, 3, 'world points')
     pixels = _as_points(pixels, 2, 'pixels')
     if len(world) != len(pixels):
@@ -253,7 +260,7 @@ def check_correspondences(world, pixels, minimum: int,
     return world, pixels
 
 
-def check_inside(pixels: np.ndarray, image_size: Tuple[int, int]) -> None:
+def check_inside(pixels: np.ndarray, image_size: tuple[int, int]) -> None:
     width, height = image_size
     outside = ((pixels[:, 0] < -0.5) | (pixels[:, 0] > width - 0.5)
                | (pixels[:, 1] < -0.5) | (pixels[:, 1] > height - 0.5))
@@ -265,7 +272,7 @@ def check_inside(pixels: np.ndarray, image_size: Tuple[int, int]) -> None:
             f'{pixels[index, 1]:.1f})')
 
 
-def check_image_size(image_size) -> Tuple[int, int]:
+def check_image_size(image_size: Iterable[float]) -> tuple[int, int]:
     try:
         width, height = (int(x) for x in image_size)
     except (TypeError, ValueError) as err:
@@ -287,7 +294,7 @@ def check_front(world: np.ndarray, rotation: np.ndarray, translation: np.ndarray
 
 
 def check_intrinsics(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                     image_size: Tuple[int, int]) -> None:
+                     image_size: tuple[int, int]) -> None:
     if not (np.all(np.isfinite(camera_matrix)) and np.all(np.isfinite(dist_coeffs))):
         raise CalibrationFitError('the fit diverged (non-finite camera matrix or distortion)')
     fx, fy, cx, cy = (camera_matrix[0, 0], camera_matrix[1, 1], camera_matrix[0, 2],
@@ -320,7 +327,7 @@ def distortion_flags(terms: int) -> int:
 
 
 def make_result(mode: str, calibration: CameraCalibration, pixels: np.ndarray,
-                reprojected: np.ndarray, **extra) -> CalibrationResult:
+                reprojected: np.ndarray, **extra: Any) -> CalibrationResult:
     residuals = np.linalg.norm(reprojected - pixels, axis=1)
     if not np.all(np.isfinite(residuals)):
         raise CalibrationFitError('the fitted camera cannot project every point (diverged fit)')
@@ -339,8 +346,9 @@ def make_result(mode: str, calibration: CameraCalibration, pixels: np.ndarray,
         rms_px=float(np.sqrt(np.mean(residuals ** 2))), **extra)
 
 
-def make_calibration(name: str, image_size, camera_matrix, dist_coeffs, rotation,
-                     translation, model: str = 'plumb_bob') -> CameraCalibration:
+def make_calibration(name: str, image_size: Sequence[int], camera_matrix: ArrayLike,
+                     dist_coeffs: ArrayLike, rotation: ArrayLike, translation: ArrayLike,
+                     model: str = 'plumb_bob') -> CameraCalibration:
     camera_matrix = np.array(camera_matrix, dtype=float)
     camera_matrix[1, 0] = camera_matrix[2, 0] = camera_matrix[2, 1] = 0.0
     camera_matrix[2, 2] = 1.0

@@ -19,17 +19,20 @@ Camera pose from world <-> raw-pixel correspondences and known intrinsics.
 mirrored in the points' plane, and refuses ambiguous or undetermined poses.
 """
 
+from __future__ import annotations
+
 from dataclasses import replace
 import math
-from typing import Optional, Sequence, Tuple
+from typing import TypeAlias
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .checks import (AMBIGUOUS_POSE_RATIO, AMBIGUOUS_PX, AMBIGUOUS_RATIO, AMBIGUOUS_ROTATION_DEG,
                      CalibrationResult, check_correspondences, check_front, check_inside,
-                     LM_CRITERIA, make_result, MAX_CENTRE_STD_RATIO, PLANAR_PNP_RATIO,
-                     point_spread)
+                     LineNumbers, LM_CRITERIA, make_result, MAX_CENTRE_STD_RATIO,
+                     PLANAR_PNP_RATIO, point_spread)
 from ..calibration import CameraCalibration
 from ..camera import Camera
 from ..errors import CalibrationFitError
@@ -38,9 +41,12 @@ __all__ = [
     'calibrate_extrinsics',
 ]
 
+# A refined pose: ((behind, rms_px), rotation (3, 3), translation (3,), rvec (3, 1)).
+_Fit: TypeAlias = tuple[tuple[bool, float], np.ndarray, np.ndarray, np.ndarray]
+
 
 def _pnp_candidates(world: np.ndarray, ideal: np.ndarray, camera_matrix: np.ndarray,
-                    planar: bool) -> list:
+                    planar: bool) -> list[tuple[np.ndarray, np.ndarray]]:
     methods = []
     if planar:
         methods.append(cv2.SOLVEPNP_IPPE)
@@ -50,7 +56,7 @@ def _pnp_candidates(world: np.ndarray, ideal: np.ndarray, camera_matrix: np.ndar
         methods.append(cv2.SOLVEPNP_SQPNP)
     if not planar or len(methods) == 1:
         methods.append(cv2.SOLVEPNP_EPNP)
-    candidates = []
+    candidates: list[tuple[np.ndarray, np.ndarray]] = []
     for method in methods:
         try:
             count, rvecs, tvecs, _ = cv2.solvePnPGeneric(world, ideal, camera_matrix, None,
@@ -62,7 +68,7 @@ def _pnp_candidates(world: np.ndarray, ideal: np.ndarray, camera_matrix: np.ndar
 
 
 def _flipped_start(world: np.ndarray, rotation: np.ndarray,
-                   translation: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+                   translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     Return a pose start on the other side of the points' best-fit plane, looking at them.
 
@@ -93,7 +99,7 @@ def _pose_center_std(world: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
         return math.inf
     params = np.concatenate((rvec.ravel(), tvec.ravel()))
 
-    def center(x):
+    def center(x: np.ndarray) -> np.ndarray:
         return -cv2.Rodrigues(x[:3])[0].T @ x[3:]
 
     step = 1e-7
@@ -103,8 +109,8 @@ def _pose_center_std(world: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
     return float(math.sqrt(max(eigen[-1], 0.0))) if np.all(np.isfinite(eigen)) else math.inf
 
 
-def _refine_pose(world: np.ndarray, ideal: np.ndarray, k: np.ndarray, rvec, tvec
-                 ) -> Optional[tuple]:
+def _refine_pose(world: np.ndarray, ideal: np.ndarray, k: np.ndarray, rvec: ArrayLike,
+                 tvec: ArrayLike) -> _Fit | None:
     """
     Refine one PnP start by Levenberg-Marquardt in ideal pixels.
 
@@ -125,9 +131,9 @@ def _refine_pose(world: np.ndarray, ideal: np.ndarray, k: np.ndarray, rvec, tvec
     return (not in_front, rms), rotation, tvec.ravel(), rvec
 
 
-def calibrate_extrinsics(intrinsics: CameraCalibration, world, pixels, *,
-                         camera_name: Optional[str] = None,
-                         lines: Optional[Sequence[int]] = None) -> CalibrationResult:
+def calibrate_extrinsics(intrinsics: CameraCalibration, world: ArrayLike, pixels: ArrayLike, *,
+                         camera_name: str | None = None,
+                         lines: LineNumbers | None = None) -> CalibrationResult:
     """
     Fit a camera's pose from world <-> raw-pixel correspondences and its known intrinsics.
 

@@ -20,15 +20,18 @@ As in the paper: a linear DLT start (:func:`dlt_projection`,
 at least 6 non-coplanar correspondences (:func:`calibrate_full`).
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 import math
-from typing import Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .checks import (CalibrationResult, check_correspondences, check_front, check_image_size,
                      check_inside, check_intrinsics, COPLANAR_RATIO, distortion_flags,
-                     LM_CRITERIA, make_calibration, make_result, point_spread)
+                     LineNumbers, LM_CRITERIA, make_calibration, make_result, point_spread)
 from ..camera import Camera
 from ..errors import CalibrationFitError
 
@@ -75,7 +78,7 @@ def dlt_projection(world: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     return projection
 
 
-def _rq(matrix: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+def _rq(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return (upper-triangular K with a positive diagonal, orthogonal Q) with K @ Q = matrix."""
     flip = np.flipud(np.eye(3))
     q, r = np.linalg.qr((flip @ matrix).T)
@@ -85,7 +88,7 @@ def _rq(matrix: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     return upper @ signs, signs @ ortho
 
 
-def decompose_projection(projection: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decompose_projection(projection: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Split a projection matrix into K (3, 3), R (3, 3) and t (3,) with ``P ~ K [R | t]``.
 
@@ -112,17 +115,17 @@ def auto_dist_terms(count: int) -> int:
 
 
 def _scan_focal_length(world: np.ndarray, pixels: np.ndarray,
-                       image_size: Tuple[int, int]) -> Optional[np.ndarray]:
+                       image_size: tuple[int, int]) -> np.ndarray | None:
     """Return K with a centred principal point and the focal length whose PnP fits best."""
     width, height = image_size
     method = getattr(cv2, 'SOLVEPNP_SQPNP', cv2.SOLVEPNP_EPNP)
 
-    def matrix(log_f):
+    def matrix(log_f: float) -> np.ndarray:
         focal = math.exp(log_f)
         return np.array(((focal, 0.0, (width - 1) / 2.0), (0.0, focal, (height - 1) / 2.0),
                          (0.0, 0.0, 1.0)))
 
-    def cost(log_f):
+    def cost(log_f: float) -> float:
         k = matrix(log_f)
         try:
             ok, rvec, tvec = cv2.solvePnP(world, pixels, k, None, flags=method)
@@ -153,13 +156,14 @@ def _scan_focal_length(world: np.ndarray, pixels: np.ndarray,
     return matrix(0.5 * (low + high))
 
 
-def _refine_full(world: np.ndarray, pixels: np.ndarray, image_size: Tuple[int, int],
-                 guess: np.ndarray, dist_terms: int, centred: bool) -> tuple:
+def _refine_full(world: np.ndarray, pixels: np.ndarray, image_size: tuple[int, int],
+                 guess: np.ndarray, dist_terms: int, centred: bool
+                 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Refine K, distortion and pose from a start; return (rms, K, D, R, t) or raise."""
     check_intrinsics(guess, np.zeros(5), image_size)
     camera_matrix = np.array(((guess[0, 0], 0.0, guess[0, 2]), (0.0, guess[1, 1], guess[1, 2]),
                               (0.0, 0.0, 1.0)))
-    dist_coeffs = np.zeros(5)
+    dist_coeffs: np.ndarray = np.zeros(5)
     # Continuation: freeing high-order distortion far from its optimum lets LM wander off (k3
     # trades against k1, k2 and the focal length), so fit the pinhole model first (with a fixed
     # principal point and aspect when the start assumed them), then k1, k2, then the rest.
@@ -185,9 +189,9 @@ def _refine_full(world: np.ndarray, pixels: np.ndarray, image_size: Tuple[int, i
     return float(rms), camera_matrix, dist_coeffs, rotation, translation
 
 
-def calibrate_full(world, pixels, image_size: Tuple[int, int], *, camera_name: str = 'camera',
-                   dist_terms: Optional[int] = None,
-                   lines: Optional[Sequence[int]] = None) -> CalibrationResult:
+def calibrate_full(world: ArrayLike, pixels: ArrayLike, image_size: Sequence[int], *,
+                   camera_name: str = 'camera', dist_terms: int | None = None,
+                   lines: LineNumbers | None = None) -> CalibrationResult:
     """
     Calibrate intrinsics, distortion and pose from non-coplanar correspondences (the paper's way).
 

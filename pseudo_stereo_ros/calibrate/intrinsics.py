@@ -21,9 +21,12 @@ refuses too few or poorly spread boards, and leaves the pose at identity.
 a camera device (every n-th frame), so no second tool is needed.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 import math
 import os
-from typing import Optional, Sequence, Tuple, Union
+from typing import TypeAlias
 
 import cv2
 import numpy as np
@@ -41,10 +44,10 @@ __all__ = [
 
 _IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
-ImageInput = Union[str, os.PathLike, np.ndarray]
+ImageInput: TypeAlias = str | os.PathLike[str] | np.ndarray
 
 
-def list_images(directory: Union[str, os.PathLike]) -> list:
+def list_images(directory: str | os.PathLike[str]) -> list[str]:
     """Return the sorted image files (png, jpg, bmp, tif, pgm, ppm) of a directory."""
     directory = os.fspath(directory)
     if not os.path.isdir(directory):
@@ -56,15 +59,16 @@ def list_images(directory: Union[str, os.PathLike]) -> list:
     return [os.path.join(directory, name) for name in names]
 
 
-def _gray(image: ImageInput, index: int, label: Optional[str] = None) -> Tuple[np.ndarray, str]:
+def _gray(image: ImageInput, index: int, label: str | None = None) -> tuple[np.ndarray, str]:
     if isinstance(image, np.ndarray):
         label = label or f'image {index}'
         array = image
     else:
         label = os.fspath(image)
-        array = cv2.imread(label, cv2.IMREAD_UNCHANGED)
-        if array is None:
+        read = cv2.imread(label, cv2.IMREAD_UNCHANGED)
+        if read is None:
             raise CalibrationFitError(f'{label}: cannot read the image')
+        array = read
     if array.ndim == 3 and array.shape[2] == 4:
         array = cv2.cvtColor(array, cv2.COLOR_BGRA2GRAY)
     elif array.ndim == 3 and array.shape[2] == 3:
@@ -72,18 +76,20 @@ def _gray(image: ImageInput, index: int, label: Optional[str] = None) -> Tuple[n
     elif array.ndim != 2:
         raise CalibrationFitError(f'{label}: not a grey or colour image (shape {array.shape})')
     if array.dtype != np.uint8:
-        array = cv2.normalize(array, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        # OpenCV's stubs require dst; None (a new array) is what OpenCV documents.
+        array = cv2.normalize(array, None, 0, 255,  # type: ignore[call-overload]
+                              cv2.NORM_MINMAX).astype(np.uint8)
     return array, label
 
 
-def _board_points(board: Tuple[int, int], square_m: float) -> np.ndarray:
+def _board_points(board: tuple[int, int], square_m: float) -> np.ndarray:
     cols, rows = board
     grid = np.zeros((cols * rows, 3))
     grid[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square_m
     return grid
 
 
-def _find_corners(gray: np.ndarray, board: Tuple[int, int]) -> Optional[np.ndarray]:
+def _find_corners(gray: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     found, corners = cv2.findChessboardCorners(gray, board, flags=flags)
     if not found:
@@ -101,7 +107,7 @@ def _find_corners(gray: np.ndarray, board: Tuple[int, int]) -> Optional[np.ndarr
     return refined.reshape(-1, 2).astype(float)
 
 
-def _coverage(corner_sets: Sequence[np.ndarray], image_size: Tuple[int, int]) -> float:
+def _coverage(corner_sets: Sequence[np.ndarray], image_size: tuple[int, int]) -> float:
     """Return the fraction of the image covered by the union of the boards' convex hulls."""
     scale = 0.25
     width, height = image_size
@@ -135,9 +141,9 @@ def _open_video(source: str, capture_factory):
     return capture, is_device
 
 
-def video_boards(source: str, *, board: Tuple[int, int], every_n: int = 10,
+def video_boards(source: str, *, board: tuple[int, int], every_n: int = 10,
                  max_frames: int = 0, max_boards: int = 40,
-                 capture_factory=None) -> Tuple[list, list, int]:
+                 capture_factory=None) -> tuple[list, list, int]:
     """
     Read every n-th frame of a video file or a camera and keep those showing the board.
 
@@ -186,11 +192,11 @@ def video_boards(source: str, *, board: Tuple[int, int], every_n: int = 10,
     return images, labels, count
 
 
-def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int],
+def calibrate_intrinsics(images: Sequence[ImageInput], *, board: tuple[int, int],
                          square_m: float, camera_name: str = 'camera', dist_terms: int = 4,
                          min_boards: int = 5, min_coverage: float = 0.3,
                          min_tilt_deg: float = 15.0,
-                         labels: Optional[Sequence[str]] = None) -> CalibrationResult:
+                         labels: Sequence[str] | None = None) -> CalibrationResult:
     """
     Calibrate a camera's intrinsics and distortion from chessboard images.
 
@@ -227,8 +233,10 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
     flags = distortion_flags(dist_terms)
 
     names = list(labels) if labels is not None else [None] * len(images)
-    image_size = None
-    labels, corner_sets, missed = [], [], []
+    image_size: tuple[int, int] | None = None
+    labels = []
+    corner_sets: list[np.ndarray] = []
+    missed: list[str] = []
     for index, image in enumerate(images):
         gray, label = _gray(image, index, names[index])
         size = (gray.shape[1], gray.shape[0])
@@ -243,6 +251,7 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
         else:
             labels.append(label)
             corner_sets.append(corners)
+    assert image_size is not None, 'images is not empty: the first one set the size'
     if len(corner_sets) < min_boards:
         raise CalibrationFitError(
             f'too few boards: found a {cols}x{rows} inner-corner board in {len(corner_sets)} of '
@@ -255,9 +264,11 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
             f'{100 * min_coverage:.0f}%; add images with the board near the edges and corners')
 
     object_points = _board_points((cols, rows), square_m)
+    # OpenCV's stubs require a camera matrix; None (no initial guess) is what OpenCV documents.
     _, camera_matrix, dist_coeffs, rvecs, tvecs, std_intrinsics = cv2.calibrateCameraExtended(
         [object_points.astype(np.float32)] * len(corner_sets),
-        [c.astype(np.float32).reshape(-1, 1, 2) for c in corner_sets], image_size, None,
+        [c.astype(np.float32).reshape(-1, 1, 2) for c in corner_sets], image_size,
+        None,  # type: ignore[call-overload]
         np.zeros(5), flags=flags, criteria=LM_CRITERIA)[:6]
     dist_coeffs = np.asarray(dist_coeffs, dtype=float).ravel()[:5]
     check_intrinsics(camera_matrix, dist_coeffs, image_size)
@@ -271,7 +282,9 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
             f'{tilt_spread:.1f} deg, need {min_tilt_deg:g}; tilt the board (up to ~45 deg) '
             'left/right and up/down')
 
-    reprojected, image_rms, point_image = [], [], []
+    reprojected: list[np.ndarray] = []
+    image_rms: list[float] = []
+    point_image: list[np.ndarray] = []
     for index, (corners, rvec, tvec) in enumerate(zip(corner_sets, rvecs, tvecs)):
         projected = cv2.projectPoints(object_points, rvec, tvec, camera_matrix,
                                       dist_coeffs)[0].reshape(-1, 2)
@@ -284,10 +297,9 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: Tuple[int, int]
              f'tilt variety {tilt_spread:.0f} deg']
     if missed:
         notes.append(f'no board found in: {", ".join(os.path.basename(m) for m in missed)}')
-    image_rms = np.array(image_rms)
     return make_result(
         'intrinsics', calibration, np.vstack(corner_sets), np.vstack(reprojected),
-        image_labels=tuple(labels), image_rms_px=image_rms,
+        image_labels=tuple(labels), image_rms_px=np.array(image_rms),
         point_image=np.concatenate(point_image), dist_terms=dist_terms, notes=tuple(notes),
         intrinsics_std=np.asarray(std_intrinsics, dtype=float).ravel()[:4])
 

@@ -20,10 +20,13 @@ and reports the epipolar distances [px]: a calibration that is off shows as a
 median far above the detection noise.  Used by ``pseudo_stereo check``.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..camera import Camera
 from ..geometry import epipolar_distance
@@ -58,7 +61,8 @@ class EpipolarCheck:
         return float(np.percentile(self.distances_px, q)) if self.count else math.nan
 
 
-def epipolar_check(cam_a: Camera, stamps_a, pixels_a, cam_b: Camera, stamps_b, pixels_b, *,
+def epipolar_check(cam_a: Camera, stamps_a: ArrayLike, pixels_a: ArrayLike, cam_b: Camera,
+                   stamps_b: ArrayLike, pixels_b: ArrayLike, *,
                    max_gap_ns: int) -> EpipolarCheck:
     """
     Compare two cameras' observations of one target with their epipolar geometry.

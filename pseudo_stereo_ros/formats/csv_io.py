@@ -28,15 +28,19 @@ Files are written to a temporary name and renamed, so a failed run never
 leaves a half-written file that looks complete.
 """
 
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable, Iterator, Sequence
 import csv
 import math
 import os
 from pathlib import Path
 import tempfile
-from typing import Collection, Iterable, Iterator, List, Optional, Sequence, Tuple
+from typing import Any
 
 import numpy as np
 
+from ..calibration import PathLike
 from ..errors import CsvError
 from ..records import Estimate, Observation
 
@@ -67,7 +71,7 @@ TRUTH_COLUMNS = ('stamp_ns', 'x', 'y', 'z')
 STAMP_MIN_NS, STAMP_MAX_NS = -2 ** 63, 2 ** 63 - 1
 
 
-def _bad_byte_line(path) -> tuple:
+def _bad_byte_line(path: PathLike) -> tuple[int, int, int] | tuple[None, None, None]:
     """Return ``(line, byte, offset)`` of the first byte of a file that is not UTF-8."""
     with open(path, 'rb') as stream:
         data = stream.read()
@@ -78,8 +82,8 @@ def _bad_byte_line(path) -> tuple:
     return None, None, None
 
 
-def read_rows(path, columns: Sequence[str], *, comments: bool = False,
-              lowercase: bool = False) -> Iterator[Tuple[str, int, dict]]:
+def read_rows(path: PathLike, columns: Sequence[str], *, comments: bool = False,
+              lowercase: bool = False) -> Iterator[tuple[str, int, dict[str, str]]]:
     """
     Yield the rows of a CSV file with the required columns: the one CSV reader of the package.
 
@@ -107,7 +111,7 @@ def read_rows(path, columns: Sequence[str], *, comments: bool = False,
     with stream:
         reader = csv.reader(stream)
         try:
-            header = None
+            header: list[str] | None = None
             for record in reader:
                 if not ''.join(record).strip() or (
                         comments and record[0].lstrip().startswith('#')):
@@ -160,7 +164,8 @@ def parse_float(text: str, source: str, line: int, column: str, *, finite: bool 
     return value
 
 
-def read_observations(path, cameras: Optional[Collection[str]] = None) -> List[Observation]:
+def read_observations(path: PathLike,
+                      cameras: Collection[str] | None = None) -> list[Observation]:
     """
     Read an observations CSV (``stamp_ns,camera,u,v``).
 
@@ -184,15 +189,17 @@ def read_observations(path, cameras: Optional[Collection[str]] = None) -> List[O
     return observations
 
 
-def read_estimates(path) -> List[Estimate]:
+def read_estimates(path: PathLike) -> list[Estimate]:
     """Read an estimates CSV (``stamp_ns,camera,x,y,z``); ``kind`` is read as ''."""
     return [Estimate(parse_stamp(row['stamp_ns'], source, line, 'stamp_ns'),
                      row['camera'].strip(),
-                     *(parse_float(row[c], source, line, c) for c in 'xyz'), '')
+                     parse_float(row['x'], source, line, 'x'),
+                     parse_float(row['y'], source, line, 'y'),
+                     parse_float(row['z'], source, line, 'z'), '')
             for source, line, row in read_rows(path, ESTIMATE_COLUMNS)]
 
 
-def read_truth(path) -> tuple:
+def read_truth(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
     """
     Read a truth CSV (``stamp_ns,x,y,z``, rows in any order).
 
@@ -200,7 +207,7 @@ def read_truth(path) -> tuple:
     :return: ((N,) int64 stamps [ns] sorted, (N, 3) positions [m])
     :raises CsvError: naming the file, line and reason (also for a repeated stamp)
     """
-    rows = {}
+    rows: dict[int, list[float]] = {}
     for source, line, row in read_rows(path, TRUTH_COLUMNS):
         stamp = parse_stamp(row['stamp_ns'], source, line, 'stamp_ns')
         if stamp in rows:
@@ -211,7 +218,8 @@ def read_truth(path) -> tuple:
             np.array([rows[s] for s in stamps], dtype=float).reshape(-1, 3))
 
 
-def _write_atomically(path, header: Sequence[str], rows: Iterable[Sequence]) -> None:
+def _write_atomically(path: PathLike, header: Sequence[str],
+                      rows: Iterable[Sequence[Any]]) -> None:
     path = Path(path)
     if path.is_dir():
         raise CsvError(f'{path}: is a directory, not a file to write')
@@ -232,21 +240,21 @@ def _write_atomically(path, header: Sequence[str], rows: Iterable[Sequence]) -> 
         raise
 
 
-def write_observations(path, observations: Iterable[Observation]) -> None:
+def write_observations(path: PathLike, observations: Iterable[Observation]) -> None:
     """Write an observations CSV; pixels with 17 significant digits (exact round trip)."""
     _write_atomically(path, OBSERVATION_COLUMNS,
                       ((o.stamp_ns, o.camera, repr(float(o.u)), repr(float(o.v)))
                        for o in observations))
 
 
-def write_estimates(path, estimates: Iterable[Estimate]) -> None:
+def write_estimates(path: PathLike, estimates: Iterable[Estimate]) -> None:
     """Write an estimates CSV in the given (stamp) order; metres, exact round trip."""
     _write_atomically(path, ESTIMATE_COLUMNS,
                       ((e.stamp_ns, e.camera, repr(e.x), repr(e.y), repr(e.z))
                        for e in estimates))
 
 
-def write_truth(path, stamps: Sequence[int], points: np.ndarray) -> None:
+def write_truth(path: PathLike, stamps: Sequence[int] | np.ndarray, points: np.ndarray) -> None:
     """Write a truth CSV of (N,) stamps [ns] and (N, 3) positions [m]."""
     _write_atomically(path, TRUTH_COLUMNS,
                       ((int(s), repr(float(p[0])), repr(float(p[1])), repr(float(p[2])))

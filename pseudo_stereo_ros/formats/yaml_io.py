@@ -30,8 +30,10 @@ Every failure is one line, ``<file>:<line>:<column>: <reason>`` (or
 ``<file>: <reason>``), raised as the caller's error class.  ROS-free.
 """
 
+from __future__ import annotations
+
 import os
-from typing import Any, Optional, Tuple, Type
+from typing import Any, TYPE_CHECKING
 
 import yaml
 from yaml.composer import ComposerError
@@ -39,6 +41,9 @@ from yaml.constructor import ConstructorError
 from yaml.scanner import ScannerError
 
 from ..errors import PseudoStereoError
+
+if TYPE_CHECKING:  # calibration imports this module: the alias is for the type checker only
+    from ..calibration import PathLike
 
 __all__ = ['DEFAULT_MAX_BYTES', 'DEFAULT_MAX_DEPTH', 'read_yaml', 'yaml_error_line']
 
@@ -53,15 +58,18 @@ class _LimitedLoader(yaml.SafeLoader):
 
     max_depth = DEFAULT_MAX_DEPTH
 
-    def __init__(self, stream):
+    def __init__(self, stream: str) -> None:
         super().__init__(stream)
         self._depth = 0
 
-    def compose_node(self, parent, index):
+    def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
         event = self.peek_event()
         if isinstance(event, yaml.AliasEvent):
+            # types-PyYAML types an event's mark as the C or the Python loader's; this
+            # pure-Python loader's marks are yaml.error.Mark, as ComposerError expects.
             raise ComposerError(None, None, f'found the alias *{event.anchor}: aliases are not '
-                                'allowed here (write the values out)', event.start_mark)
+                                'allowed here (write the values out)',
+                                event.start_mark)  # type: ignore[arg-type]
         self._depth += 1
         try:
             if self._depth > self.max_depth:
@@ -72,7 +80,7 @@ class _LimitedLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
 
-    def fetch_flow_collection_start(self, token_class):
+    def fetch_flow_collection_start(self, token_class: type[yaml.Token]) -> None:
         # Refuse deep flow nesting while scanning: the scanner looks up to 1,024 characters
         # ahead for a possible key at every level, which the composer's check comes too late for.
         if self.flow_level >= self.max_depth:
@@ -80,7 +88,7 @@ class _LimitedLoader(yaml.SafeLoader):
                                self.get_mark())
         super().fetch_flow_collection_start(token_class)
 
-    def construct_object(self, node, deep=False):
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
         try:
             return super().construct_object(node, deep=deep)
         except (ValueError, TypeError, OverflowError) as err:
@@ -123,9 +131,9 @@ def yaml_error_line(err: yaml.YAMLError, text: str = '') -> str:
     return 'not valid YAML: ' + ' '.join(str(err).split())
 
 
-def read_yaml(path, *, error: Type[PseudoStereoError] = PseudoStereoError,
+def read_yaml(path: PathLike, *, error: type[PseudoStereoError] = PseudoStereoError,
               max_bytes: int = DEFAULT_MAX_BYTES,
-              max_depth: int = DEFAULT_MAX_DEPTH) -> Tuple[Any, Optional[yaml.Node]]:
+              max_depth: int = DEFAULT_MAX_DEPTH) -> tuple[Any, yaml.Node | None]:
     """
     Read and parse a small YAML file without aliases.
 
@@ -162,6 +170,7 @@ def read_yaml(path, *, error: Type[PseudoStereoError] = PseudoStereoError,
         finally:
             loader.dispose()
     except yaml.YAMLError as err:
-        line = yaml_error_line(err, text)
-        raise error(f'{source}:{line}' if line[0].isdigit() else f'{source}: {line}') from err
+        reason = yaml_error_line(err, text)
+        raise error(f'{source}:{reason}' if reason[0].isdigit() else f'{source}: {reason}') \
+            from err
     return data, node

@@ -24,7 +24,9 @@ follows the lens distortion of the calibration.  Pixel ``(i, j)`` covers
 ``[i - 0.5, i + 0.5] x [j - 0.5, j + 0.5]`` (OpenCV's and ROS's convention).
 """
 
-from typing import Optional, Sequence
+from __future__ import annotations
+
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -57,7 +59,7 @@ class BallRenderer:
 
     def __init__(self, camera: Camera, *, radius_m: float = DEFAULT_BALL_RADIUS_M,
                  ball_rgb: Sequence[int] = DEFAULT_BALL_RGB, texture: bool = True,
-                 noise_std: float = 0.0, supersample: int = 4, seed: int = 0):
+                 noise_std: float = 0.0, supersample: int = 4, seed: int = 0) -> None:
         if not radius_m > 0:
             raise ValueError(f'radius_m must be positive, got {radius_m}')
         if int(supersample) < 1:
@@ -72,7 +74,8 @@ class BallRenderer:
         self._distorted = bool(np.any(camera.D != 0))
         width, height = camera.image_size
         self.background = self._background(width, height, texture)
-        self._noise = None
+        # (positive, negative) parts of the noise frames, (_NOISE_FRAMES, H, W, 3) uint8 each
+        self._noise: tuple[np.ndarray, np.ndarray] | None = None
         if noise_std > 0:
             shape = (_NOISE_FRAMES, height, width, 3)
             noise = self._rng.normal(0.0, noise_std, shape)
@@ -96,11 +99,11 @@ class BallRenderer:
         image = smooth + tint + grain + stripes
         return np.clip(np.round(image), 0, 255).astype(np.uint8)
 
-    def ball_center_px(self, position: Sequence[float]) -> np.ndarray:
+    def ball_center_px(self, position: Sequence[float] | np.ndarray) -> np.ndarray:
         """Return the (2,) raw pixel of the ball centre (NaN behind the camera)."""
         return self.camera.project(np.asarray(position, dtype=float).reshape(1, 3))[0]
 
-    def coverage(self, position: Sequence[float]) -> tuple:
+    def coverage(self, position: Sequence[float] | np.ndarray) -> tuple[int, int, np.ndarray]:
         """
         Return the fraction of each pixel covered by the ball near its image.
 
@@ -144,7 +147,7 @@ class BallRenderer:
         patch = inside.reshape(h, s, w, s).mean(axis=(1, 3), dtype=np.float32)
         return x0, y0, patch
 
-    def render(self, position: Optional[Sequence[float]]) -> np.ndarray:
+    def render(self, position: Sequence[float] | np.ndarray | None) -> np.ndarray:
         """
         Render one frame.
 
