@@ -61,7 +61,7 @@ from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
 from ..records import Observation
 from ..sim.scenarios import default_rig, make_scenario, shutter_stamps, truth_at
 
-__all__ = ['bench_load', 'relay_main', 'source_main']
+__all__ = ['bench_load', 'console_script', 'relay_main', 'rss_growth', 'source_main']
 
 #: Image point rate per camera [Hz] of the load row, and its receive -> publish p99 target.
 LOAD_RATE_HZ = 1000.0
@@ -70,7 +70,8 @@ WARM_UP_S = 0.5
 _NS = 1_000_000_000
 
 
-def _script(name: str) -> str:
+def console_script(name: str) -> str:
+    """Return the path of a console script of this installation (beside python, or on PATH)."""
     candidate = Path(sys.executable).parent / name
     if candidate.exists():
         return str(candidate)
@@ -255,7 +256,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     names = [camera.name for camera in default_rig()]
     if target == 'fuser':
         process = subprocess.Popen(
-            [_script('fuser'), '--executor', executor, '--ros-args', '-r',
+            [console_script('fuser'), '--executor', executor, '--ros-args', '-r',
              f'__ns:=/{namespace}', '-p', 'reorder_window_s:=0.0', '--log-level', 'warn',
              *[arg for parameter in parameters for arg in ('-p', parameter)]],
             stdin=subprocess.DEVNULL, preexec_fn=_pinned(
