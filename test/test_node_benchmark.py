@@ -48,4 +48,4 @@ def test_quick_benchmark_prints_each_quantity_with_its_baseline_ratio(repo_dir):
     for label in ('fuser node, 2 x 1,000 Hz, stamp -> received',
                   'baseline: bare relay, same rate and core'):
         assert re.search(r'p99 [\d.]+ .*lost \d+ of \d+ in, \d+ out; CPU \d+% .*RSS [\d.]+ -> '
-                         r'[\d.]+ MB', rows[label][1]), (label, rows[label][1])
+                         r'[\d.]+ MiB', rows[label][1]), (label, rows[label][1])

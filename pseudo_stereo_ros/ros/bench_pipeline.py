@@ -405,7 +405,7 @@ def _load_rows(seconds: float, executor: str, soak: bool) -> Tuple[List[str], in
         extra = (f'  p99 {p99:.2f} max {max(latencies, default=float("nan")) * 1e3:.1f} ms; '
                  f'lost {lost_in} of {result["sent"]} in, {lost_out} out; '
                  f'CPU {result["cpu_fraction"]:.0%} of a core; '
-                 f'RSS {early / 1024:.1f} -> {late / 1024:.1f} MB')
+                 f'RSS {early / 1024:.1f} -> {late / 1024:.1f} MiB')
         if result is fuser:
             rows.append(_row(label, latencies, target_p99_ms=TARGET_P99_MS,
                              baseline=relay['latencies_s'], extra=extra))

@@ -39,11 +39,12 @@ reported by DDS as the ``message_lost`` event: counted per topic, a warning
 at most every 5 s per topic while it happens, and the total in the summary
 at the end.  A positive ``qos_depth`` keeps only that many (``KEEP_LAST``),
 as before; messages overwritten in that queue are not reported by DDS.
-Measured here with ``EventsExecutor`` (the default of every executable):
-15,000 PointStamped at 2,000, 5,000 and 12,700 messages/s, all recorded;
-with the ``SingleThreadedExecutor`` 91% at 5,000/s (the rest reported
-lost), and the old default (depth 1000) recorded 1,880 of a 6,000-message
-burst without a word.
+Measured here (a publisher in another process, 15,000 PointStamped): with
+``EventsExecutor``, the default of every executable, all recorded at 2,000,
+5,000 and 12,000 messages/s; with ``--executor single`` at 5,000/s 8,718
+recorded and 3,547 reported lost (the rest still queued when it was
+stopped); the old recorder (depth 1000, ``SingleThreadedExecutor``)
+recorded 1,880 of a 6,000-message burst without a word.
 
 **Crash-safe bag.**  The bag is written with
 :class:`~pseudo_stereo_ros.formats.checkpoint_bag.CheckpointBagWriter`:
