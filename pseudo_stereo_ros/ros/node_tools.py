@@ -223,12 +223,28 @@ def make_executor(kind: str = DEFAULT_EXECUTOR, *, context=None) -> Executor:
     :raises StartupError: an unknown kind
     """
     if kind == 'events':
-        return EventsExecutor(context=context)
+        return _events_executor(context)
     if kind == 'single':
         return SingleThreadedExecutor(context=context)
     if kind == 'multi':
         return MultiThreadedExecutor(context=context)
     raise StartupError(f'--executor {kind}: not one of {", ".join(EXECUTORS)}')
+
+
+def _events_executor(context) -> Executor:
+    """Return rclpy's EventsExecutor, also when ``sys.stderr`` is not a file (captured)."""
+    # Its constructor enables faulthandler on sys.stderr, which needs a file descriptor.
+    try:
+        sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        if sys.__stderr__ is None:
+            return SingleThreadedExecutor(context=context)
+        captured, sys.stderr = sys.stderr, sys.__stderr__
+        try:
+            return EventsExecutor(context=context)
+        finally:
+            sys.stderr = captured
+    return EventsExecutor(context=context)
 
 
 def split_executor_option(args: Optional[Sequence[str]] = None) -> Tuple[str, List[str]]:
