@@ -84,7 +84,7 @@ TARGETS_MS = {'window': 1.0, 'full': 3.0, 'fuser': 0.5, 'end_to_end': 5.0}
 #: Run sizes: frames (detector), image points (fuser), seconds of end-to-end streaming and of
 #: the 2 x 1,000 Hz load.
 FULL_RUN = {'frames': 88, 'points': 300, 'seconds': 5.0, 'load_seconds': 10.0}
-QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0, 'load_seconds': 2.0}
+QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0, 'load_seconds': 1.0}
 FPS = 30.0
 
 _LABEL_WIDTH = 46
