@@ -33,14 +33,21 @@ def test_quick_benchmark_prints_each_quantity_with_its_baseline_ratio(repo_dir):
     measured = ['detector, full frame', 'detector, search window 48 px',
                 'fuser node, point received -> published',
                 'end to end, image stamp -> /ball/position',
-                'shutter -> /ball/position published']
+                'shutter -> /ball/position published',
+                'fuser node, 2 x 1,000 Hz, stamp -> received']
     baselines = ['baseline: cv2.cvtColor BGR->HSV, full frame',
                  'baseline: core Fuser.update, same points',
                  'baseline: image stamp -> bare subscriber',
-                 'baseline: bare PointStamped hop']
+                 'baseline: bare PointStamped hop',
+                 'baseline: bare relay, same rate and core']
     assert set(measured + baselines) <= set(rows), result.stdout
     for label in measured:
         count, rest = rows[label]
         assert count > 0, label
         assert re.search(r'<= [\d.]+ (ok|OVER)\s+\d+\.\d\dx', rest), (label, rest)
     assert all(rows[label][0] > 0 for label in baselines), result.stdout
+    # The load rows say what was lost, the CPU share and the memory of the fuser.
+    for label in ('fuser node, 2 x 1,000 Hz, stamp -> received',
+                  'baseline: bare relay, same rate and core'):
+        assert re.search(r'p99 [\d.]+ .*lost \d+ of \d+ in, \d+ out; CPU \d+% .*RSS [\d.]+ -> '
+                         r'[\d.]+ MiB', rows[label][1]), (label, rows[label][1])

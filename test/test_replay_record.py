@@ -25,13 +25,16 @@ import threading
 import time
 
 import numpy as np
-from pseudo_stereo_ros.formats.bagio import (bag_message_counts, image_message, IMAGE_TYPE,
-                                             iter_raw, point_message, read_observations,
-                                             write_messages, write_observations)
+from pseudo_stereo_ros.formats.bagio import (bag_message_counts, BagError, image_message,
+                                             IMAGE_TYPE, iter_raw, point_message,
+                                             read_observations, typestore, write_messages,
+                                             write_observations)
 from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.ros import replay_node
+from pseudo_stereo_ros.ros.messages import observation_to_point
 from pseudo_stereo_ros.ros.record_node import RecordNode
 from pseudo_stereo_ros.ros.replay_node import ReplayNode
+from pseudo_stereo_ros.sim.scenarios import default_rig, make_scenario, observe, shutter_stamps
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -348,3 +351,161 @@ def test_record_stopped_mid_recording_keeps_everything(tmp_path, context, sig):
     assert len(indices) == int(taken.group(1))
     assert indices == list(range(len(indices)))
     assert 1 <= len(indices) <= sent
+
+
+def _point(k, frame_id=''):
+    msg = PointStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1_721_679_791, k * 1000
+    msg.header.frame_id = frame_id
+    msg.point.x = float(k)
+    return msg
+
+
+def _bag_counts(bag):
+    """Return topic -> messages of the bag's last checkpoint (metadata.yaml), {} before one."""
+    try:
+        return {topic: count for topic, (_, count) in bag_message_counts(bag).items()}
+    except BagError:
+        return {}
+
+
+def test_record_burst_loses_nothing_silently(tmp_path, context):
+    """
+    A burst far faster than the old recorder took (issue: 1,915 of 6,000, nothing logged).
+
+    The recorder is stopped (SIGSTOP) while 6,000 messages go out on each topic, then resumed:
+    the worst case of a recorder that falls behind.  ``deep``: a reliable publisher that keeps
+    all 6,000: nothing can be lost, every one is recorded.  ``shallow``: a publisher that keeps
+    only 10, so DDS loses what the recorder did not acknowledge: the recorder reports the loss,
+    and recorded plus reported lost is exactly what was sent.
+    """
+    prefix = f'/burst{os.getpid()}'
+    deep, shallow = f'{prefix}/deep', f'{prefix}/shallow'
+    out = tmp_path / 'burst'
+    recorder = subprocess.Popen(
+        [str(BIN / 'record'), '--ros-args', '-p', f'bag:={out}', '-p',
+         f'topics:=[{deep},{shallow}]', '-p', 'types:=[geometry_msgs/msg/PointStamped,'
+         'geometry_msgs/msg/PointStamped]'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = _lines(recorder)
+    seen = []
+    node = rclpy.create_node('burst_feeder', context=context)
+    count = 6000
+    publishers = {deep: node.create_publisher(PointStamped, deep, QoSProfile(depth=count)),
+                  shallow: node.create_publisher(PointStamped, shallow, QoSProfile(depth=10))}
+    try:
+        deadline = time.monotonic() + 30.0
+        while (time.monotonic() < deadline
+               and any(p.get_subscription_count() == 0 for p in publishers.values())):
+            time.sleep(0.05)
+        time.sleep(0.5)  # the reliable readers match a moment after they show in the graph
+        recorder.send_signal(signal.SIGSTOP)
+        try:
+            for k in range(count):
+                for publisher in publishers.values():
+                    publisher.publish(_point(k))
+        finally:
+            recorder.send_signal(signal.SIGCONT)
+        assert publishers[deep].wait_for_all_acked(rclpy.duration.Duration(seconds=60.0))
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and _bag_counts(out).get(deep, 0) < count:
+            time.sleep(0.2)
+        time.sleep(1.5)  # the last loss events
+        recorder.send_signal(signal.SIGINT)
+        recorder.wait(timeout=30)
+        _wait_for_line(lines, r'(?!)', seen)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+        node.destroy_node()
+    output = ''.join(seen)
+    summary = re.search(r'recorded (\d+) messages \((.*?)\)(?:; LOST (\d+) \((.*?)\))?', output)
+    assert summary, output
+    recorded = {t: int(n) for t, n in re.findall(r'(\S+): (\d+)', summary.group(2))}
+    lost = {t: int(n) for t, n in re.findall(r'(\S+): (\d+)', summary.group(4) or '')}
+    print(summary.group(0))
+    assert recorded[deep] == count and deep not in lost, output
+    assert recorded[shallow] + lost.get(shallow, 0) == count, output
+    assert lost[shallow] > 0 and re.search(r'WARN.*shallow: \d+ messages lost', output), output
+    # The bag holds what the summary says, in order.
+    assert _x_values(out, deep) == list(range(count))
+    shallow_x = _x_values(out, shallow)
+    assert len(shallow_x) == recorded[shallow] and shallow_x == sorted(set(shallow_x))
+
+
+def _x_values(bag, topic):
+    """Return point.x of every message of a PointStamped topic (any topic name), as ints."""
+    return [int(typestore().deserialize_cdr(data, msgtype).point.x)
+            for _, msgtype, _, data in iter_raw(bag, [topic])]
+
+
+def test_record_killed_leaves_a_bag_that_track_and_replay_read(tmp_path, context, repo_dir):
+    """
+    ``kill -9`` of the recorder: the bag on disk is complete up to its last checkpoint (1 s).
+
+    (The old recorder left a 0-byte mcap and no metadata: nothing could be read back.)
+    """
+    names = [f'k{os.getpid()}a', f'k{os.getpid()}b']
+    cameras = default_rig()
+    scenario = make_scenario('spiral')
+    stamps = [shutter_stamps(30.0, 2.0, phase_s=k / 60.0) for k in range(2)]
+    rename = {camera.name: name for camera, name in zip(cameras, names)}
+    observations = [Observation(rename[o.camera], o.stamp_ns, o.u, o.v)
+                    for o in observe(scenario, cameras, stamps)]
+    topics = [f'/{name}/ball/image_point' for name in names]
+    out = tmp_path / 'killed'
+    recorder = subprocess.Popen(
+        [str(BIN / 'record'), '--ros-args', '-p', f'bag:={out}', '-p',
+         f'topics:=[{",".join(topics)}]', '-p',
+         'types:=[geometry_msgs/msg/PointStamped,geometry_msgs/msg/PointStamped]'],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    node = rclpy.create_node('kill_feeder', context=context)
+    publishers = {name: node.create_publisher(PointStamped, topic, QoSProfile(depth=1000))
+                  for name, topic in zip(names, topics)}
+    half = len(observations) // 2
+    try:
+        deadline = time.monotonic() + 30.0
+        while (time.monotonic() < deadline
+               and any(p.get_subscription_count() == 0 for p in publishers.values())):
+            time.sleep(0.05)
+        time.sleep(0.5)
+        for observation in observations[:half]:
+            publishers[observation.camera].publish(observation_to_point(observation))
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and sum(_bag_counts(out).values()) < half:
+            time.sleep(0.1)
+        # More messages, and the kill while they are coming in: those may or may not be in.
+        for observation in observations[half:]:
+            publishers[observation.camera].publish(observation_to_point(observation))
+            time.sleep(0.002)
+        recorder.send_signal(signal.SIGKILL)
+        recorder.wait(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+        node.destroy_node()
+    recorded = read_observations(out, names)
+    assert len(recorded) >= half
+    for name in names:
+        sent = [o for o in observations if o.camera == name]
+        got = [o for o in recorded if o.camera == name]
+        assert got == sent[:len(got)]  # a prefix of what was sent, nothing invented
+    # pseudo_stereo track --bag reads it ...
+    rig = repo_dir / 'config' / 'rig'
+    estimates = tmp_path / 'estimates.csv'
+    result = subprocess.run(
+        [str(BIN / 'pseudo_stereo'), 'track', '--bag', str(out),
+         '--camera', f'{names[0]}={rig / "camera1.yaml"}',
+         '--camera', f'{names[1]}={rig / "camera2.yaml"}', '--output', str(estimates)],
+        capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert len(estimates.read_text().splitlines()) > len(recorded) // 2
+    # ... and so does replay (its start-up reads the index).
+    replay = ReplayNode(context=context, parameter_overrides=[
+        rclpy.parameter.Parameter('bag', value=str(out)),
+        rclpy.parameter.Parameter('wait_for_subscribers_s', value=60.0)])
+    try:
+        assert replay.summary() == 'played 0 messages (0 skipped)'
+        assert replay._count == len(recorded)
+    finally:
+        replay.destroy_node()

@@ -39,6 +39,15 @@ compare between machines and runs:
    ``/ball/position`` published (target: median 1.5 ms, p99 5 ms) and frame
    available -> image point (target 1 ms); baseline: a bare PointStamped hop
    between processes in the same run; and where each millisecond goes.
+5. the fuser node under load, 2 x 1,000 Hz image points (2,000 messages/s)
+   from another process, the fuser pinned to one core
+   (:mod:`~pseudo_stereo_ros.ros.bench_load`): source stamp ->
+   ``/ball/position`` received, with inputs and outputs lost, the CPU share
+   of the fuser and its resident memory; baseline: a bare relay node
+   (subscribe, publish the same message) on the same core and executor at
+   the same rate, in the same run.  Target: p99 <= 2 ms, nothing lost.
+   ``--soak 600`` runs only this row for ten minutes and prints the fuser's
+   resident memory every minute.
 
 Absolute numbers depend on the machine and its load; compare the ratios.
 """
@@ -47,7 +56,6 @@ import argparse
 import copy
 import os
 from pathlib import Path
-import shutil
 import signal
 import subprocess
 import sys
@@ -55,7 +63,23 @@ import tempfile
 import time
 from typing import List, Optional, Sequence, Tuple
 
+import cv2
+from geometry_msgs.msg import PointStamped
 import numpy as np
+import rclpy
+from rclpy.logging import LoggingSeverity
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
+
+from .bench_load import bench_load, console_script, LOAD_RATE_HZ, rss_growth, TARGET_P99_MS
+from .fuser_node import FuserNode
+from .messages import array_to_image, ns_to_stamp, observation_to_point, stamp_to_ns
+from .node_tools import close, DEFAULT_EXECUTOR, EXECUTORS, make_executor, spin
+from ..detection import BallDetector
+from ..sim.rendering import BallRenderer
+from ..sim.scenarios import (config_dir, DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
+                             shutter_stamps, truth_at)
 
 __all__ = ['bench_camera_detectors', 'hop_probe_main', 'main', 'print_camera_detector_rows',
            'transport_probe_main']
@@ -65,9 +89,10 @@ PAPER_CAPTURE_TO_3D_MS = 4.13
 TARGETS_MS = {'window': 1.0, 'full': 3.0, 'fuser': 0.5, 'end_to_end': 5.0,
               'camera_detector': 1.0, 'shutter_to_position': 1.5,
               'shutter_to_position_p99': 5.0}
-#: Run sizes: frames (detector), image points (fuser), seconds of end-to-end streaming.
-FULL_RUN = {'frames': 88, 'points': 300, 'seconds': 5.0}
-QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0}
+#: Run sizes: frames (detector), image points (fuser), seconds of end-to-end streaming and of
+#: the 2 x 1,000 Hz load.
+FULL_RUN = {'frames': 88, 'points': 300, 'seconds': 5.0, 'load_seconds': 10.0}
+QUICK_RUN = {'frames': 20, 'points': 60, 'seconds': 1.0, 'load_seconds': 1.0}
 FPS = 30.0
 
 _LABEL_WIDTH = 46
@@ -87,7 +112,8 @@ def _header() -> str:
 
 
 def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = None,
-         baseline: Optional[Sequence[float]] = None, extra: str = '') -> str:
+         baseline: Optional[Sequence[float]] = None, extra: str = '',
+         target_p99_ms: Optional[float] = None) -> str:
     """
     Return one table row: n, median and p90 [ms], the target verdict and the baseline ratio.
 
@@ -96,12 +122,16 @@ def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = N
     :param target_ms: the target for the median [ms]; None for a baseline row
     :param baseline: durations [s] of the baseline; the ratio is median / baseline median
     :param extra: text after the ratio
+    :param target_p99_ms: a target for the 99th percentile instead [ms]
     :return: the row
     """
     median, p90 = _stats(seconds)
     target = ''
     if target_ms is not None:
         target = f'<= {target_ms:g} ' + ('ok' if median <= target_ms else 'OVER')
+    elif target_p99_ms is not None:
+        p99 = float(np.percentile(np.asarray(seconds) * 1e3, 99)) if len(seconds) else np.nan
+        target = f'p99 <= {target_p99_ms:g} ' + ('ok' if p99 <= target_p99_ms else 'OVER')
     ratio = ''
     if baseline is not None:
         base = _stats(baseline)[0]
@@ -112,15 +142,12 @@ def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = N
 
 def _frame_points(count: int) -> np.ndarray:
     """Return (count, 3) true positions [m] at camera 1's shutters, the spiral repeated."""
-    from ..sim.scenarios import make_scenario, shutter_stamps, truth_at
     scenario = make_scenario('spiral')
     points = truth_at(scenario, shutter_stamps(FPS, scenario.duration_s))
     return np.resize(points, (count, 3))
 
 
 def _renderers():
-    from ..sim.rendering import BallRenderer
-    from ..sim.scenarios import default_rig
     cameras = default_rig()
     return cameras, [BallRenderer(camera, noise_std=2.0, seed=i)
                      for i, camera in enumerate(cameras)]
@@ -137,8 +164,6 @@ def bench_detector(count: int) -> dict:
     :return: per-frame durations [s]: ``full``, ``window`` (48 px) and ``baseline``
         (``cv2.cvtColor`` BGR->HSV of the full frame)
     """
-    import cv2
-    from ..detection import BallDetector
     _, renderers = _renderers()
     images = [renderers[0].render(p) for p in _frame_points(count)]
     detectors = {'full': BallDetector(search_window_px=0),
@@ -160,8 +185,6 @@ def bench_detector(count: int) -> dict:
 
 def _observations(count: int) -> list:
     """Return ``count`` observations of the default rig: spiral laps, one after another."""
-    from ..sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
-                                 shutter_stamps)
     cameras = default_rig()
     scenario = make_scenario('spiral')
     period_ns = round(1e9 / FPS)
@@ -185,32 +208,27 @@ def bench_fuser_node(count: int) -> dict:
     :return: durations [s]: ``node`` (the node's own receive-to-publish times) and
         ``baseline`` (``Fuser.update`` of a copy of the node's core fuser, same observations)
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.logging import LoggingSeverity
-    from rclpy.parameter import Parameter
-    from geometry_msgs.msg import PointStamped
-    from .fuser_node import FuserNode
-    from .messages import observation_to_point
-
     observations = _observations(count)
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     namespace = f'bench_fuser_{os.getpid()}'
     rclpy.logging.set_logger_level(f'{namespace}.fuser', LoggingSeverity.WARN)
     baseline = []
+    nodes = []
     try:
         fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
             Parameter('reorder_window_s', value=0.0),
             Parameter('diagnostics_period_s', value=0.0)])
+        nodes.append(fuser)
         core = copy.deepcopy(fuser.fuser)  # same cameras and options, no state yet
         source = rclpy.create_node('bench_source', context=context, namespace=namespace)
+        nodes.append(source)
         publishers = {name: source.create_publisher(PointStamped, f'{name}/ball/image_point',
                                                     100)
                       for name in sorted({o.camera for o in observations})}
         received = []
         sink = source.create_subscription(PointStamped, 'ball/position', received.append, 100)
-        executor = SingleThreadedExecutor(context=context)
+        executor = make_executor(DEFAULT_EXECUTOR, context=context)
         executor.add_node(fuser)
         executor.add_node(source)
         for count_so_far, observation in enumerate(observations, 1):
@@ -218,30 +236,16 @@ def bench_fuser_node(count: int) -> dict:
             core.update(observation)
             baseline.append(time.perf_counter() - start)
             publishers[observation.camera].publish(observation_to_point(observation))
-            deadline = time.monotonic() + 1.0
-            while (fuser.fuser.stats['observations'] < count_so_far
-                   and time.monotonic() < deadline):
-                executor.spin_once(timeout_sec=0.01)
-        executor.spin_once(timeout_sec=0.05)
+            spin([], executor=executor, context=context, duration_s=1.0, period_s=0.01,
+                 until=lambda n=count_so_far: fuser.fuser.stats['observations'] >= n)
+        spin([], executor=executor, context=context, duration_s=0.05)
         del sink
         times = list(fuser.processing_times_s)
         executor.shutdown()
-        fuser.destroy_node()
-        source.destroy_node()
+        nodes = [fuser, source]
     finally:
-        rclpy.try_shutdown(context=context)
+        close(nodes, context=context)
     return {'node': times, 'baseline': baseline}
-
-
-def _script(name: str) -> str:
-    candidate = Path(sys.executable).parent / name
-    if candidate.exists():
-        return str(candidate)
-    found = shutil.which(name)
-    if found is None:
-        raise FileNotFoundError(f'console script {name!r} not found beside {sys.executable} '
-                                'or on PATH')
-    return found
 
 
 def transport_probe_main(argv: Optional[List[str]] = None) -> int:
@@ -256,11 +260,6 @@ def transport_probe_main(argv: Optional[List[str]] = None) -> int:
     :param argv: the namespace, then the camera names; None for ``sys.argv[1:]``
     :return: exit status
     """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import Image
-
     namespace, *names = sys.argv[1:] if argv is None else argv
     arrivals = []
 
@@ -274,13 +273,9 @@ def transport_probe_main(argv: Optional[List[str]] = None) -> int:
         for name in names:
             node.create_subscription(Image, f'{name}/image_raw', on_image,
                                      qos_profile_sensor_data)
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        spin([node])
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        close([node])
     sys.stdout.write(''.join(f'{sec * 1_000_000_000 + nanosec} {received}\n'
                              for sec, nanosec, received in arrivals))
     return 0
@@ -330,13 +325,6 @@ def bench_end_to_end(seconds: float) -> dict:
         ``transport`` (image stamp -> the same images received by a bare subscriber in
         another process); both only for images published after the warm-up
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import qos_profile_sensor_data
-    from geometry_msgs.msg import PointStamped
-    from sensor_msgs.msg import Image
-    from .messages import array_to_image, ns_to_stamp, stamp_to_ns
-
     cameras, renderers = _renderers()
     points = _frame_points(200)
     names = [c.name for c in cameras]
@@ -347,15 +335,16 @@ def bench_end_to_end(seconds: float) -> dict:
         params = Path(tmp) / 'params.yaml'
         params.write_text('/**/fuser:\n  ros__parameters:\n    reorder_window_s: 0.0\n')
         processes = [subprocess.Popen(
-            [_script('detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
+            [console_script('detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
              '--log-level', 'warn'], stdin=subprocess.DEVNULL) for name in names]
         processes.append(subprocess.Popen(
-            [_script('fuser'), '--ros-args', '-r', f'__ns:=/{namespace}', '--params-file',
+            [console_script('fuser'), '--ros-args', '-r', f'__ns:=/{namespace}', '--params-file',
              str(params), '--log-level', 'warn'], stdin=subprocess.DEVNULL))
         probe = _start_transport_probe(f'/{namespace}', names)
         transport_pairs = []
         context = rclpy.Context()
         rclpy.init(args=[], context=context)
+        node = None
         try:
             node = rclpy.create_node('bench_e2e', namespace=namespace, context=context)
             publishers = [node.create_publisher(Image, f'{name}/image_raw',
@@ -365,14 +354,12 @@ def bench_end_to_end(seconds: float) -> dict:
                 positions.append((stamp_to_ns(msg.header.stamp), time.time_ns()))
 
             node.create_subscription(PointStamped, 'ball/position', on_position, 100)
-            executor = SingleThreadedExecutor(context=context)
+            executor = make_executor(DEFAULT_EXECUTOR, context=context)
             executor.add_node(node)
-            deadline = time.monotonic() + 30.0
             # Each image topic has two subscribers: the detector and the transport probe.
-            while time.monotonic() < deadline and not (
-                    all(p.get_subscription_count() >= 2 for p in publishers)
-                    and node.count_publishers(f'/{namespace}/ball/position')):
-                executor.spin_once(timeout_sec=0.05)
+            spin([], executor=executor, context=context, duration_s=30.0, until=lambda: (
+                all(p.get_subscription_count() >= 2 for p in publishers)
+                and node.count_publishers(f'/{namespace}/ball/position')))
             time.sleep(0.5)  # let the reliable point topics match too
             period = 1.0 / (FPS * len(cameras))
             start = time.monotonic()
@@ -383,21 +370,18 @@ def bench_end_to_end(seconds: float) -> dict:
                 image = renderers[camera].render(points[index // len(cameras) % len(points)])
                 msg = array_to_image(image, 'bgr8', 0, names[camera])
                 next_time = start + index * period
-                while time.monotonic() < next_time:
-                    executor.spin_once(timeout_sec=max(next_time - time.monotonic(), 0))
+                spin([], executor=executor, context=context,
+                     duration_s=next_time - time.monotonic())
                 stamp_ns = time.time_ns()
                 if index == warm_up:
                     since_ns = stamp_ns
                 msg.header.stamp = ns_to_stamp(stamp_ns)
                 publishers[camera].publish(msg)
                 index += 1
-            end = time.monotonic() + 0.3
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
+            spin([], executor=executor, context=context, duration_s=0.3)
             executor.shutdown()
-            node.destroy_node()
         finally:
-            rclpy.try_shutdown(context=context)
+            close([node], context=context)
             transport_pairs = _stop_transport_probe(probe)
             for process in processes:
                 process.terminate()
@@ -483,7 +467,7 @@ def bench_camera_detectors(seconds: float) -> dict:
     # late for its shutter because a process was still starting.
     epoch_ns = time.time_ns() + 3_000_000_000
     processes = [subprocess.Popen(
-        [_script('camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
+        [console_script('camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
          '-p', 'source:=virtual', '-p', f'calibration_file:={_rig_file(name)}',
          '-p', 'fps:=30.0', '-p', f'phase_s:={index / 60.0}', '-p', f'epoch_ns:={epoch_ns}',
          '-p', f'seed:={index}', '-p', 'ground_truth_topic:=ball/ground_truth',
@@ -640,6 +624,40 @@ def print_camera_detector_rows(seconds: float) -> int:
     return 0
 
 
+def _load_rows(seconds: float, executor: str, soak: bool) -> Tuple[List[str], int]:
+    """Run the 2 x 1,000 Hz load against the bare relay and the fuser; return rows, status."""
+    relay = bench_load(min(seconds, 10.0) if soak else seconds, target='relay',
+                       executor=executor)
+    fuser = bench_load(seconds, target='fuser', executor=executor,
+                       report_every_s=60.0 if soak else None)
+    rows = []
+    status = 0
+    for result, label in ((fuser, f'fuser node, 2 x {LOAD_RATE_HZ:,.0f} Hz, stamp -> received'),
+                          (relay, '  baseline: bare relay, same rate and core')):
+        latencies = result['latencies_s']
+        p99 = float(np.percentile(latencies, 99)) * 1e3 if latencies else float('nan')
+        early, late = rss_growth(result['rss_kb'])
+        lost_in = result['sent'] - result['taken']
+        lost_out = (result['outputs'] - result['received']) if result['outputs'] is not None \
+            else float('nan')
+        extra = (f'  p99 {p99:.2f} max {max(latencies, default=float("nan")) * 1e3:.1f} ms; '
+                 f'lost {lost_in} of {result["sent"]} in, {lost_out} out; '
+                 f'CPU {result["cpu_fraction"]:.0%} of a core; '
+                 f'RSS {early / 1024:.1f} -> {late / 1024:.1f} MiB')
+        if result is fuser:
+            rows.append(_row(label, latencies, target_p99_ms=TARGET_P99_MS,
+                             baseline=relay['latencies_s'], extra=extra))
+        else:
+            rows.append(_row(label, latencies, extra=extra))
+        if not latencies:
+            rows.append(f'  {label.strip()}: nothing received (DDS discovery failed?)')
+            status = 1
+    late = fuser['source_late_p99_ms']
+    rows.append(f'  (executor {executor}; {seconds:g} s; the lateness of the source itself, '
+                f'p99 {late:.2f} ms, is part of both rows)')
+    return rows, status
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the benchmarks and print the table; return the exit status."""
     parser = argparse.ArgumentParser(prog='bench_pipeline', description=__doc__.split('\n')[1])
@@ -649,26 +667,41 @@ def main(argv: Optional[List[str]] = None) -> int:
                         help=f'image points for the fuser (default {FULL_RUN["points"]})')
     parser.add_argument('--seconds', type=float, default=None,
                         help=f'end-to-end run time [s] (default {FULL_RUN["seconds"]:g})')
+    parser.add_argument('--load-seconds', type=float, default=None,
+                        help=f'2 x {LOAD_RATE_HZ:,.0f} Hz load run time [s] (default '
+                        f'{FULL_RUN["load_seconds"]:g})')
+    parser.add_argument('--executor', choices=EXECUTORS, default=DEFAULT_EXECUTOR,
+                        help=f'executor of the fuser and the relay under load (default '
+                        f'{DEFAULT_EXECUTOR})')
+    parser.add_argument('--soak', type=float, nargs='?', const=600.0, default=None,
+                        metavar='SECONDS',
+                        help='only the load row, for SECONDS (default 600), with the '
+                        "fuser's resident memory every minute")
     parser.add_argument('--quick', action='store_true',
                         help='a short run that only checks the benchmark works: ' +
                         ', '.join(f'{k} {v:g}' for k, v in QUICK_RUN.items()))
     parser.add_argument('--skip-end-to-end', action='store_true',
-                        help='no separate processes (no DDS discovery needed)')
+                        help='no separate processes (no DDS discovery needed; no load row)')
     options = parser.parse_args(argv)
     sizes = QUICK_RUN if options.quick else FULL_RUN
     for key, value in sizes.items():
         if getattr(options, key) is None:
             setattr(options, key, value)
         if not getattr(options, key) > 0:
-            parser.error(f'--{key} must be positive')
+            parser.error(f'--{key.replace("_", "-")} must be positive')
+    if options.soak is not None and not options.soak > 0:
+        parser.error('--soak must be positive')
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     # Before any DDS participant exists: 900 kB frames need a larger shared-memory segment.
-    from ..rig import config_dir
     os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
                           str(config_dir() / 'fastdds_large_images.xml'))
     print('bench_pipeline: 640x480 frames, default rig, spiral; times in ms per frame or event;')
     print('ratio = median / median of the baseline row below it (same inputs, same run)')
     print(_header())
+    if options.soak is not None:
+        rows, status = _load_rows(options.soak, options.executor, soak=True)
+        print('\n'.join(rows))
+        return status
     detector = bench_detector(options.frames)
     print(_row('detector, full frame', detector['full'], target_ms=TARGETS_MS['full'],
                baseline=detector['baseline']))
@@ -700,6 +733,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             status = 1
         sys.stdout.flush()
         status = max(status, print_camera_detector_rows(options.seconds))
+        rows, load_status = _load_rows(options.load_seconds, options.executor, soak=False)
+        print('\n'.join(rows))
+        status = max(status, load_status)
     print(f'paper (other hardware): image analysis {PAPER_IMAGE_ANALYSIS_MS} ms, '
           f'capture to 3D {PAPER_CAPTURE_TO_3D_MS} ms; (+x ms): median minus baseline median')
     return status

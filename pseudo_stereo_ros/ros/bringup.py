@@ -43,15 +43,15 @@ import time
 from typing import Dict, List, Optional
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 
 from .camera_detector_node import CameraDetectorNode
 from .detector_node import DetectorNode
 from .fuser_node import FuserNode
 from .monitor_node import MonitorNode
-from .node_tools import init_context, STARTUP_ERRORS
+from .node_tools import (check_params_files, close, DEFAULT_EXECUTOR, EXECUTORS, init_context,
+                         spin, STARTUP_ERRORS)
 from ..errors import RigError
 from ..fusion import METHODS
 from ..rig import check_camera_name, config_dir
@@ -100,8 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='stop after this many seconds and print a summary (0: run)')
     parser.add_argument('--plot', default=None,
                         help='write a PNG of trajectory and error here at the end')
-    parser.add_argument('--executor', choices=('multi', 'single'), default='single',
-                        help='rclpy executor (default: single, the fastest in Python)')
+    parser.add_argument('--executor', choices=EXECUTORS, default=DEFAULT_EXECUTOR,
+                        help=f'rclpy executor (default: {DEFAULT_EXECUTOR}, '
+                        'rclpy.experimental.EventsExecutor: the fastest in Python)')
     return parser
 
 
@@ -383,29 +384,20 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'bringup: error: {err}', file=sys.stderr)
         return 2
     context = rclpy.Context()
-    if not init_context(['bringup', '--ros-args', '--params-file', params_file] + ros_args[1:],
-                        context=context, name='bringup'):
+    init_args = ['bringup', '--ros-args', '--params-file', params_file] + ros_args[1:]
+    if not init_context(init_args, context=context, name='bringup'):
         return 1
     nodes = []
-    executor = None
     try:
         try:
             build_nodes(options, context, cameras, nodes)
         except STARTUP_ERRORS as err:
             print(f'bringup: error: cannot start: {err}', file=sys.stderr)
             return 1
-        executor_class = (MultiThreadedExecutor if options.executor == 'multi'
-                          else SingleThreadedExecutor)
-        executor = executor_class(context=context)
-        for node in nodes:
-            executor.add_node(node)
+        check_params_files(nodes, init_args)
         started = time.monotonic()
-        deadline = started + options.duration if options.duration > 0 else math.inf
-        try:
-            while context.ok() and time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0)))
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+        spin(nodes, executor=options.executor, context=context,
+             duration_s=options.duration if options.duration > 0 else None)
         monitor = next((node for node in nodes if isinstance(node, MonitorNode)), None)
         if monitor is not None:
             _print_summary(monitor, [n for n in nodes if isinstance(n, CameraDetectorNode)],
@@ -413,12 +405,10 @@ def main(argv: Optional[List[str]] = None) -> int:
             if options.plot:
                 write_plot(monitor, options.plot)
                 print(f'  plot: {options.plot}')
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
     finally:
-        if executor is not None:
-            executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        close(nodes, context=context)
     return 0
 
 

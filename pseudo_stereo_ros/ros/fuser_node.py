@@ -40,9 +40,9 @@ from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from visualization_msgs.msg import Marker
 
-from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
-                       point_to_observation, trail_marker)
-from .node_tools import declare, load_cameras, run_node, StartupError
+from .messages import (diagnostic_array, diagnostic_status, fill_point, point_to_observation,
+                       trail_marker)
+from .node_tools import declare, load_cameras, PublisherWatch, run_node, StartupError
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, Fuser,
                       METHODS)
 from ..records import Observation
@@ -150,6 +150,11 @@ class FuserNode(Node):
         self._reported_at = time.monotonic()
 
         self._position_pub = self.create_publisher(PointStamped, 'ball/position', 10)
+        self._position_msg = PointStamped()  # filled and published once per estimate
+        #: Other publishers of /ball/position (a second fuser doubles every message).
+        self.position_watch = PublisherWatch(
+            self, self._position_pub, 'two fusers on the same topics? every position '
+            'reaches subscribers twice')
         self._marker_pub = self.create_publisher(Marker, 'ball/marker', 10)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._subscriptions = [
@@ -220,7 +225,9 @@ class FuserNode(Node):
         estimate = self.fuser.update(observation)
         if estimate is None:
             return
-        self._position_pub.publish(estimate_to_point(estimate, self.world_frame))
+        self._position_pub.publish(fill_point(self._position_msg, estimate.stamp_ns,
+                                              self.world_frame, estimate.x, estimate.y,
+                                              estimate.z))
         self._trail.append((estimate.x, estimate.y, estimate.z))
         self._newest_ns = estimate.stamp_ns
 
@@ -256,6 +263,8 @@ class FuserNode(Node):
         values['late (older than a fused point, after the reorder window)'] = \
             self.node_stats['late']
         values['new sessions (time jumped or paused)'] = self.node_stats['sessions']
+        values[f'other publishers of {self._position_pub.topic_name}'] = \
+            self.position_watch.others
         inputs = sum(self._inputs.values())
         if inputs and not estimates:
             level, message = 'warn', 'receiving image points but no estimates yet'

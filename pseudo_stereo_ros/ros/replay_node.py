@@ -35,7 +35,6 @@ no such bag, not a bag, no messages) or when the bag turns out to be
 damaged during playback.
 """
 
-import importlib
 import threading
 import time
 from typing import List, Optional
@@ -48,32 +47,13 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from .messages import ns_to_stamp
-from .node_tools import declare, init_context, logger_name, STARTUP_ERRORS, StartupError
+from .messages import message_class, ns_to_stamp
+from .node_tools import (check_params_files, close, declare, init_context, logger_name, spin,
+                         split_executor_option, STARTUP_ERRORS, StartupError)
 from ..formats.bagio import bag_message_counts, BagError, iter_raw
 from ..stamps import seconds_to_ns
 
-__all__ = ['ReplayNode', 'main', 'message_class']
-
-
-def message_class(msgtype: str):
-    """
-    Return the rclpy message class of a type name such as ``geometry_msgs/msg/PointStamped``.
-
-    :raises StartupError: the type's Python package is not installed
-    """
-    try:
-        from rosidl_runtime_py.utilities import get_message
-    except ImportError:
-        get_message = None
-    try:
-        if get_message is not None:
-            return get_message(msgtype)
-        package, kind, name = msgtype.split('/')
-        return getattr(importlib.import_module(f'{package}.{kind}'), name)
-    except (ValueError, ImportError, AttributeError) as err:
-        raise StartupError(f'message type {msgtype!r} is not available in this environment '
-                           f'({err})') from err
+__all__ = ['ReplayNode', 'main']
 
 
 def _parse_remap(entries: List[str]) -> dict:
@@ -218,6 +198,11 @@ def main(args=None) -> int:
     """Play a bag; exit 0 at its end or on a signal, 1 when it cannot start or the bag is bad."""
     name = logger_name('replay', args)
     logger = rclpy.logging.get_logger(name)
+    try:
+        executor, args = split_executor_option(args)
+    except StartupError as err:
+        logger.fatal(f'cannot start: {err}')
+        return 1
     if not init_context(args, name=name):  # a bad --params-file or --ros-args: one line
         return 1
     node = None
@@ -227,20 +212,15 @@ def main(args=None) -> int:
         except STARTUP_ERRORS as err:
             logger.fatal(f'cannot start: {err}')
             return 1
-        while rclpy.ok() and not node.finished.is_set():
-            try:
-                rclpy.spin_once(node, timeout_sec=0.1)
-            except _rclpy.RCLError:
-                if rclpy.ok():  # not a signal that shut the context between two waits
-                    raise
+        check_params_files([node], args)
+        spin([node], executor=executor, until=node.finished.is_set)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        close([node])
         if node is not None:
-            node.destroy_node()
             # Not through the node: after a signal its /rosout publisher is invalid.
             logger.info(node.summary())
-        rclpy.try_shutdown()
     return 1 if node is not None and node.error else 0
 
 
