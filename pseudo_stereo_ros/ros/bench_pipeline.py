@@ -64,6 +64,7 @@ import time
 from typing import List, Optional, Sequence, Tuple
 
 import cv2
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import rclpy
@@ -77,9 +78,10 @@ from .fuser_node import FuserNode
 from .messages import array_to_image, ns_to_stamp, observation_to_point, stamp_to_ns
 from .node_tools import close, DEFAULT_EXECUTOR, EXECUTORS, make_executor, spin
 from ..detection import BallDetector
+from ..rig import config_dir
 from ..sim.rendering import BallRenderer
-from ..sim.scenarios import (config_dir, DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
-                             shutter_stamps, truth_at)
+from ..sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe, shutter_stamps,
+                             truth_at)
 
 __all__ = ['bench_camera_detectors', 'hop_probe_main', 'main', 'print_camera_detector_rows',
            'transport_probe_main']
@@ -403,11 +405,6 @@ def hop_probe_main(argv: Optional[List[str]] = None) -> int:
     :param argv: the topic and the rate [Hz]; None for ``sys.argv[1:]``
     :return: exit status
     """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from geometry_msgs.msg import PointStamped
-    from .messages import ns_to_stamp
-
     topic, rate = sys.argv[1:] if argv is None else argv
     rclpy.init(args=[])
     node = None
@@ -421,13 +418,9 @@ def hop_probe_main(argv: Optional[List[str]] = None) -> int:
             publisher.publish(msg)
 
         node.create_timer(1.0 / float(rate), tick)
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        spin([node])
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        close([node])
     return 0
 
 
@@ -452,15 +445,6 @@ def bench_camera_detectors(seconds: float) -> dict:
         ``fuser`` (the fuser node's receive -> publish [s]) and ``diagnostics`` (camera name
         -> the camera_detector's last diagnostic values)
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.logging import LoggingSeverity
-    from rclpy.parameter import Parameter
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import PointStamped
-    from .fuser_node import FuserNode
-    from .messages import stamp_to_ns
-
     names = ['camera1', 'camera2']
     namespace = f'bench_cd_{os.getpid()}'
     # Past the processes' start-up (the cameras' own times include every frame): no frame is
@@ -485,6 +469,7 @@ def bench_camera_detectors(seconds: float) -> dict:
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     rclpy.logging.set_logger_level(f'{namespace}.fuser', LoggingSeverity.WARN)
+    fuser = probe = None
     try:
         fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
             Parameter('reorder_window_s', value=0.0), Parameter('diagnostics_period_s',
@@ -522,25 +507,18 @@ def bench_camera_detectors(seconds: float) -> dict:
 
         probe.create_subscription(PointStamped, hop_topic, on_hop, 100)
         probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(fuser)
-        executor.add_node(probe)
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and not (
-                all(probe.count_publishers(f'/{namespace}/{name}/ball/image_point')
-                    for name in names) and probe.count_publishers(hop_topic)):
-            executor.spin_once(timeout_sec=0.05)
+        executor = make_executor(DEFAULT_EXECUTOR, context=context)
+        spin([fuser, probe], executor=executor, context=context, duration_s=30.0, until=lambda: (
+            all(probe.count_publishers(f'/{namespace}/{name}/ball/image_point')
+                for name in names) and probe.count_publishers(hop_topic)))
         # The reliable connections settle first, and the shutters start at the epoch.
         since_ns = max(time.time_ns() + 500_000_000, epoch_ns)
-        end = time.monotonic() + (since_ns - time.time_ns()) / 1e9 + seconds
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+        spin([fuser, probe], executor=executor, context=context,
+             duration_s=(since_ns - time.time_ns()) / 1e9 + seconds)
+        executor.shutdown(timeout_sec=1.0)
         fuser_times = list(fuser.processing_times_s)
-        executor.shutdown()
-        fuser.destroy_node()
-        probe.destroy_node()
     finally:
-        rclpy.try_shutdown(context=context)
+        close([fuser, probe], context=context)
         for process in processes:
             process.send_signal(signal.SIGINT)
         for process in processes:
@@ -556,7 +534,6 @@ def bench_camera_detectors(seconds: float) -> dict:
 
 
 def _rig_file(name: str) -> str:
-    from ..rig import config_dir
     return str(config_dir() / 'rig' / f'{name}.yaml')
 
 

@@ -43,10 +43,9 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
-from .detector_node import declare_detector
 from .messages import (array_to_image, calibration_to_camera_info, diagnostic_array,
                        diagnostic_status, estimate_to_point, header, image_point, ns_to_stamp)
-from .node_tools import declare, run_node, StartupError
+from .node_tools import declare, declare_detector, run_node, StartupError
 from ..calibration import load_calibration, load_camera_info
 from ..camera import Camera
 from ..capture import CaptureLoop, DeviceSource, FileSource, Frame, VirtualSource

@@ -31,50 +31,9 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from .messages import EncodingError, image_point, image_to_array
-from .node_tools import declare, run_node, StartupError
-from ..detection import BallDetector, CHOICES
+from .node_tools import declare, declare_detector, run_node
 
-__all__ = ['DetectorNode', 'declare_detector', 'main']
-
-
-def declare_detector(node: Node) -> BallDetector:
-    """
-    Declare the ball detector's parameters on a node and return the detector they configure.
-
-    Shared by the ``detector`` and ``camera_detector`` nodes, so both take the same
-    parameters (``hsv_lower``, ``hsv_upper``, ``mono_threshold``, ``min_area_px``,
-    ``max_area_px``, ``open_kernel_px``, ``choice``, ``search_window_px``).
-
-    :param node: the node
-    :return: the detector
-    :raises StartupError: a value the detector refuses, naming the parameters
-    """
-    hsv_lower = declare(node, 'hsv_lower', [5, 120, 100],
-                        'lowest ball colour (H 0..179, S, V 0..255), OpenCV HSV')
-    hsv_upper = declare(node, 'hsv_upper', [25, 255, 255],
-                        'highest ball colour (H, S, V); lower H > upper H wraps around red')
-    mono_threshold = declare(node, 'mono_threshold', 200,
-                             'mono8 images: a ball pixel is at least this bright',
-                             min_value=0, max_value=255)
-    min_area = declare(node, 'min_area_px', 4.0, 'smallest ball blob area [px]', min_value=0.0)
-    max_area = declare(node, 'max_area_px', 20000.0, 'largest ball blob area [px]',
-                       min_value=0.0)
-    open_kernel = declare(node, 'open_kernel_px', 3,
-                          'morphological opening kernel size [px]; 0 disables',
-                          min_value=0, max_value=31)
-    choice = declare(node, 'choice', 'largest', 'which blob when there are several',
-                     choices=CHOICES)
-    window = declare(node, 'search_window_px', 48,
-                     'half side of the search window around the last detection [px]; '
-                     '0: always the full frame', min_value=0)
-    try:
-        return BallDetector(
-            hsv_lower=hsv_lower, hsv_upper=hsv_upper, mono_threshold=mono_threshold,
-            min_area_px=min_area, max_area_px=max_area, open_kernel_px=open_kernel,
-            choice=choice, search_window_px=window)
-    except (ValueError, TypeError) as err:
-        raise StartupError(f'detector parameters (hsv_lower, hsv_upper, min_area_px, '
-                           f'max_area_px, ...): {err}') from err
+__all__ = ['DetectorNode', 'main']
 
 
 class DetectorNode(Node):
