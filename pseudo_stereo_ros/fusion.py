@@ -75,9 +75,14 @@ __all__ = [
     'FuserConfigError',
     'METHODS',
     'fuse',
+    'make_fuser',
 ]
 
-METHODS = ('paper', 'naive')
+#: Every fusion method: the paper's, naive pairing, and the causal trajectory fit
+#: (:mod:`pseudo_stereo_ros.trajectory`).
+METHODS = ('paper', 'naive', 'trajectory')
+# The methods of :class:`Fuser` itself.
+_FUSER_METHODS = ('paper', 'naive')
 
 #: Default for treating two cameras' observations as simultaneous: 1 ms, 3% of a 30 fps period.
 DEFAULT_SYNC_TOLERANCE_NS = 1_000_000
@@ -164,8 +169,10 @@ class Fuser:
         names = [camera.name for camera in cameras]
         if len(set(names)) != len(names):
             raise FuserConfigError(f'camera names must be unique, got {names}')
-        if method not in METHODS:
-            raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+        if method not in _FUSER_METHODS:
+            raise FuserConfigError(f'unknown method {method!r} for Fuser (known: '
+                                   f'{", ".join(_FUSER_METHODS)}; make_fuser() builds any of '
+                                   f'{", ".join(METHODS)})')
         #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
         self.max_sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
                                          else sync_tolerance_ns)
@@ -430,6 +437,35 @@ class Fuser:
         return point
 
 
+def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
+               method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
+               max_gap_ns: Optional[int] = None, **method_options):
+    """
+    Build the fuser of a method: the one factory of ``track``, holdout, Table 1 and the node.
+
+    :param cameras: the calibrated cameras
+    :param method: one of :data:`METHODS`
+    :param sync_tolerance_ns: see :class:`Fuser` [ns]
+    :param max_gap_ns: see :class:`Fuser` [ns]
+    :param method_options: options of the method (``trajectory``: those of
+        :class:`~pseudo_stereo_ros.trajectory.TrajectoryFuser`)
+    :return: a :class:`Fuser` or :class:`~pseudo_stereo_ros.trajectory.TrajectoryFuser`
+        (``update``, ``process``, ``reset``, ``stats``)
+    :raises FuserConfigError: an unknown method or an invalid option
+    """
+    if method == 'trajectory':
+        from .trajectory import TrajectoryFuser
+        return TrajectoryFuser(cameras, sync_tolerance_ns=sync_tolerance_ns,
+                               max_gap_ns=max_gap_ns, **method_options)
+    if method not in METHODS:
+        raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+    if method_options:
+        raise FuserConfigError(f'method {method!r} takes no option '
+                               f'{", ".join(sorted(method_options))}')
+    return Fuser(cameras, method=method, sync_tolerance_ns=sync_tolerance_ns,
+                 max_gap_ns=max_gap_ns)
+
+
 def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
          observations: Iterable[Observation], **options) -> Tuple[List[Estimate], Counter]:
     """
@@ -437,9 +473,9 @@ def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
 
     :param cameras: the calibrated cameras
     :param observations: the observations, any order
-    :param options: keyword options of :class:`Fuser`
+    :param options: keyword options of :func:`make_fuser` (``method`` among them)
     :return: ``(estimates, stats)``: the estimates in stamp order and the fuser's counters
     :raises FuserConfigError: an invalid option
     """
-    fuser = Fuser(cameras, **options)
+    fuser = make_fuser(cameras, **options)
     return fuser.process(observations), fuser.stats

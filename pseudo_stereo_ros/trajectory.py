@@ -83,6 +83,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import FuserConfigError
+from .fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
 from .records import Estimate, Observation
 from collections import Counter
 import math
@@ -93,6 +94,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import FuserConfigError
+from .fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
 from .records import Estimate, Observation
 
 __all__ = [
@@ -175,7 +177,6 @@ class TrajectoryFuser:
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
                  pending_estimate: str = 'predicted'):
-        from .fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)

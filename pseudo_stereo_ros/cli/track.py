@@ -40,7 +40,8 @@ from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_poi
                              image_topic, read_images, read_observations as read_bag_observations,
                              read_positions, write_estimates as write_bag_estimates)
 from ..formats.csv_io import read_observations, read_truth, write_estimates
-from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
+from ..fusion import (DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser,
+                      METHODS)
 from ..records import Observation
 
 NAME = 'track'
@@ -186,7 +187,7 @@ def run(args) -> int:
     options = {'method': args.method,
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap')}
-    fuser = Fuser(cameras, **options)
+    fuser = make_fuser(cameras, **options)
     notes = []
     truth = read_truth(args.truth) if args.truth else None
     truth_name = args.truth
@@ -220,6 +221,9 @@ def run(args) -> int:
         print(note, file=sys.stderr)
     stats = fuser.stats
     dropped = ', '.join(f'{key} {stats[key]}' for key in DROP_REASONS if stats[key])
+    if stats['outlier'] or stats['breaks']:
+        dropped += (', ' if dropped else '') + (f'not fitted (outliers) {stats["outlier"]}, '
+                                                f'impacts {stats["breaks"]}')
     print(f'{len(observations)} observations from {source} -> {len(estimates)} estimates '
           f'({args.method}) written to {" and ".join(targets)}'
           + (f'; no estimate: {dropped}' if dropped else ''), file=sys.stderr)

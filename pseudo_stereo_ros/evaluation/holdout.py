@@ -58,7 +58,7 @@ __all__ = [
 ]
 
 #: Methods :func:`holdout` knows: the fuser's, plus the interpolation oracle.
-HOLDOUT_METHODS = ('paper', 'naive', 'oracle')
+HOLDOUT_METHODS = ('paper', 'naive', 'trajectory', 'oracle')
 
 
 class HoldoutResult(NamedTuple):

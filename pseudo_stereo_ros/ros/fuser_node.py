@@ -39,8 +39,9 @@ from visualization_msgs.msg import Marker
 from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
                        point_to_observation, trail_marker)
 from .node_tools import declare, load_cameras, run_node, StartupError
-from ..fusion import DROP_REASONS, Fuser, METHODS
+from ..fusion import DROP_REASONS, make_fuser, METHODS
 from ..records import Observation
+from ..trajectory import DEFAULT_MAX_WINDOW_S
 from ..reorder import ReorderBuffer
 
 __all__ = ['FuserNode', 'main']
@@ -99,14 +100,23 @@ class FuserNode(Node):
         #: True when the calibrations are the simulated rig's (calibration_files not given).
         self.default_calibration = not files
         self.cameras = load_cameras(names, files)
+        path_window_s = declare(self, 'trajectory_max_window_s', DEFAULT_MAX_WINDOW_S,
+                                'method trajectory: longest window of the path fit [s]',
+                                min_value=0.01, max_value=5.0, read_only=True)
+        order = declare(self, 'trajectory_order', 2,
+                        'method trajectory: 2 constant acceleration, 1 constant velocity',
+                        min_value=1, max_value=2, read_only=True)
+        options = {} if method != 'trajectory' else {'max_window_s': path_window_s,
+                                                       'order': order}
         try:
-            self.fuser = Fuser(self.cameras, method=method,
-                               sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
-                               max_gap_ns=_seconds_to_ns('max_gap_s', gap_s))
+            self.fuser = make_fuser(self.cameras, method=method,
+                                    sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
+                                    max_gap_ns=_seconds_to_ns('max_gap_s', gap_s), **options)
         except ValueError as err:
             if isinstance(err, StartupError):
                 raise
-            raise StartupError(f'parameters sync_tolerance_s / max_gap_s: {err}') from err
+            raise StartupError(f'parameters sync_tolerance_s / max_gap_s / trajectory_*: '
+                               f'{err}') from err
         self._names = list(names)
         self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
         self._max_gap_ns = self.fuser.max_gap_ns
@@ -227,6 +237,10 @@ class FuserNode(Node):
             if stats[key]:
                 values[f'dropped: {key}'] = stats[key]
         values['resets'] = stats['resets']
+        if self.fuser.method == 'trajectory':
+            values['outliers (not fitted)'] = stats['outlier']
+            values['impacts (breaks)'] = stats['breaks']
+            values['detection noise [px]'] = self.fuser.sigma_px or 0.0
         values['late (older than a fused point, after the reorder window)'] = \
             self.node_stats['late']
         values['new sessions (time jumped back)'] = self.node_stats['sessions']
