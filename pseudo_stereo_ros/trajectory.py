@@ -132,6 +132,8 @@ _JUMP = np.arange(9, 12)
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
+# The prefix sums' reference stamp moves when the newest frame is this far from it [ns].
+_REANCHOR_NS = 400_000_000
 _BREAK_GRID = 9
 # Smoothing of the running innovation spread and of Rice's noise estimate; the clip of one
 # noise sample (in variances) once warmed up.
@@ -226,6 +228,11 @@ class TrajectoryFuser:
         self._rows = np.zeros((_CAPACITY, 2, 3))
         self._rhs = np.zeros((_CAPACITY, 2))
         self._weight = np.ones(_CAPACITY)
+        # Prefix sums of each frame's normal matrix and moment in the coefficients of a fixed
+        # reference stamp (_reference): a window's system is a difference of two prefixes,
+        # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
+        self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
+        self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
         #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
         #: (impacts), ``outlier`` (detections not fitted), ``predicted`` (estimates at pending
         #: detections), and one key per drop reason.
@@ -244,6 +251,8 @@ class TrajectoryFuser:
     def reset(self) -> None:
         """Forget the flight (the measured noise and the counters are kept)."""
         self._start = self._end = 0
+        self._reference = None  # stamp of the prefix sums' coefficients [ns]
+        self._weights_guessed = True  # weights of a new flight's frames, before its first fit
         self._last = {}  # camera name -> its newest stamp
         self._newest = None
         # The path of the newest estimate: (t_ref, beta (12,), covariance (12, 12) per px^2,
@@ -321,8 +330,13 @@ class TrajectoryFuser:
         index, stamp, x, y, late = admitted
         rotation = self._rotation[index]
         rows = np.array((rotation[0] - x * rotation[2], rotation[1] - y * rotation[2]))
-        frame = (stamp, index, rows, rows @ self._center[index],
-                 self._focal[index] / self._depth[index])
+        depth = self._depth[index]
+        if self._path is not None:
+            point = self._predict(stamp)[0]
+            predicted = float(rotation[2] @ (point - self._center[index]))
+            if predicted > 0.0:
+                depth = predicted
+        frame = (stamp, index, rows, rows @ self._center[index], self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         else:
@@ -365,17 +379,20 @@ class TrajectoryFuser:
     def _insert(self, frame) -> None:
         """Insert a frame in time order and forget frames beyond the longest window."""
         stamp, index, rows, rhs, weight = frame
+        rebuild = None
         if self._end == _CAPACITY:
             count = self._end - self._start
             for array in self._arrays():
                 array[:count] = array[self._start:self._end].copy()
             self._start, self._end = 0, count
+            rebuild = 0
         end = self._end
         position = end
         if end > self._start and stamp < self._stamp[end - 1]:
             position = self._start + int(np.searchsorted(self._stamp[self._start:end], stamp))
             for array in self._arrays():
                 array[position + 1:end + 1] = array[position:end].copy()
+            rebuild = position if rebuild is None else rebuild
         self._stamp[position] = stamp
         self._camera[position] = index
         self._rows[position] = rows
@@ -386,6 +403,41 @@ class TrajectoryFuser:
         start += int(np.searchsorted(self._stamp[start:self._end],
                                      self._stamp[self._end - 1] - self.max_window_ns))
         self._start = min(start, self._end - 1)
+        if self._reference is None or self._stamp[self._end - 1] - self._reference > _REANCHOR_NS:
+            self._reference = int(self._stamp[self._start])
+            rebuild = self._start
+        if rebuild is None:
+            rebuild = position
+        self._rebuild(max(rebuild, self._start))
+
+    def _rebuild(self, first: int) -> None:
+        """Recompute the prefix sums from frame ``first`` on (``first == _start``: from 0)."""
+        end = self._end
+        if first == end - 1 and first > self._start:  # the common case: one frame appended
+            stamp = int(self._stamp[first])
+            row = self._position_row(stamp - self._reference,
+                                     None if self._break is None else stamp - self._break)
+            weight = self._weight[first]
+            design = self._rows[first] @ row * weight
+            self._prefix_gram[end] = self._prefix_gram[first] + design.T @ design
+            self._prefix_moment[end] = self._prefix_moment[first] + \
+                (self._rhs[first] * weight) @ design
+            return
+        if first == self._start:
+            self._prefix_gram[first] = 0.0
+            self._prefix_moment[first] = 0.0
+        stamps = self._stamp[first:end]
+        jump = None if self._break is None else stamps - self._break
+        maps = self._position_map(stamps - self._reference, jump)
+        weight = self._weight[first:end, None, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
+        rhs = self._rhs[first:end] * weight[:, :, 0]
+        np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
+                  out=self._prefix_gram[first + 1:end + 1])
+        self._prefix_gram[first + 1:end + 1] += self._prefix_gram[first]
+        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0,
+                  out=self._prefix_moment[first + 1:end + 1])
+        self._prefix_moment[first + 1:end + 1] += self._prefix_moment[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -408,12 +460,23 @@ class TrajectoryFuser:
                     0.0, np.asarray(jump_offsets_ns, dtype=float) / _SCALE_NS)
         return maps
 
+    @staticmethod
+    def _position_row(offset_ns: int, jump_offset_ns) -> np.ndarray:
+        """Return the (3, 12) map of :meth:`_position_map` at one time (the fast path)."""
+        tau = offset_ns / _SCALE_NS
+        row = np.zeros((3, 12))
+        row[0, 0] = row[1, 3] = row[2, 6] = 1.0
+        row[0, 1] = row[1, 4] = row[2, 7] = tau
+        row[0, 2] = row[1, 5] = row[2, 8] = tau * tau
+        if jump_offset_ns is not None and jump_offset_ns > 0:
+            row[0, 9] = row[1, 10] = row[2, 11] = jump_offset_ns / _SCALE_NS
+        return row
+
     def _predict(self, stamp: int):
         """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
         t_ref, beta, covariance, t_break = self._path
-        jump = None if t_break is None else np.array((stamp - t_break,))
-        position_map = self._position_map(np.array((stamp - t_ref,)), jump)[0]
-        return position_map @ beta, position_map @ covariance @ position_map.T
+        row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        return row @ beta, row @ covariance @ row.T
 
     def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray, point: np.ndarray):
         """Return (innovation (2,) px, Jacobian (2, 3) px/m) of a detection, or None."""
@@ -532,6 +595,7 @@ class TrajectoryFuser:
         self._insert(pending)
         self._insert(frame)
         self._break = t_break
+        self._rebuild(self._start)
         self._break_range = (low, high)
         self._segment += 1
         self._pending = None
@@ -582,8 +646,9 @@ class TrajectoryFuser:
             low, high = self._break_range
             best = self._refine_break((stamps, self._rows[start:end], self._rhs[start:end],
                                        self._weight[start:end]), stamp, low, high)
-            if best is not None:
+            if best is not None and best[0] != self._break:
                 self._break = best[0]
+                self._rebuild(start)
             if np.count_nonzero(stamps > high) >= _REFINE_FRAMES:
                 self._break_range = None
         point = self._fit(stamp, index)
@@ -601,59 +666,97 @@ class TrajectoryFuser:
         t_break = self._break
         if t_break is not None and not stamps[0] < t_break:
             t_break = None  # the impact has left the window: plain fits
-        jump = None if t_break is None else stamps - t_break
-        maps = self._position_map(stamps - stamp, jump)  # (n, 3, 12)
-        weight = self._weight[start:end]
-        design = np.einsum('nra,nam->nrm', self._rows[start:end], maps) * weight[:, None, None]
-        rhs = self._rhs[start:end] * weight[:, None]
-        # Newest first: window k holds the newest sizes[k] frames.
-        gram = np.cumsum(np.einsum('nri,nrj->nij', design[::-1], design[::-1]), axis=0)
-        moment = np.cumsum(np.einsum('nri,nr->ni', design[::-1], rhs[::-1]), axis=0)
+        # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
+        # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
+        sizes = np.append(_WINDOWS[_WINDOWS < count], count)
+        if self.order == 1 or count < _WINDOWS[0]:
+            sizes = sizes[-1:]
+        delta = (stamp - self._reference) / _SCALE_NS
+        shift = np.eye(12)
+        for axis in range(3):
+            block = shift[3 * axis:3 * axis + 3, 3 * axis:3 * axis + 3]
+            block[0, 1], block[0, 2], block[1, 2] = -delta, delta * delta, -2.0 * delta
+        matrices = shift.T @ (self._prefix_gram[end] - self._prefix_gram[end - sizes]) @ shift
+        moments = (self._prefix_moment[end] - self._prefix_moment[end - sizes]) @ shift
+        fits = []
         if self.order == 2 and count >= _WINDOWS[0]:
-            sizes = np.append(_WINDOWS[_WINDOWS < count], count)
-            fits = []
             if t_break is None:
-                fits.append(self._solve(gram, moment, sizes, _CA))
+                fits.append(self._solve(matrices, moments, sizes, _CA))
             else:
                 spans = stamps[::-1][sizes - 1] < t_break
-                fits.append(self._solve(gram, moment, sizes[~spans], _CA))
-                fits.append(self._solve(gram, moment, sizes[spans], np.arange(12)))
-            fits = [fit for fit in fits if fit is not None]
-        else:
-            fits = []
-        position = self._position_map(np.zeros(1, dtype=np.int64),
-                                      None if jump is None else np.array((stamp - t_break,)))[0]
+                fits.append(self._solve(matrices[~spans], moments[~spans], sizes[~spans], _CA))
+                fits.append(self._solve(matrices[spans], moments[spans], sizes[spans],
+                                        np.arange(12)))
+        position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept = self._keep(fits, position, index)
         after = count if t_break is None else int(np.count_nonzero(stamps > t_break))
         if kept is None and after >= 3:
             # Too few frames for constant acceleration (a flight's first frames): velocity,
             # never across an impact.
-            kept = self._keep([self._solve(gram, moment, np.array((after,)), _CV)], position,
-                              index)
+            if after == count:
+                system = (matrices[-1:], moments[-1:])
+            else:
+                system = self._window_system(stamp, end - after, end)
+            kept = self._keep([self._solve(system[0], system[1], np.array((after,)), _CV)],
+                              position, index)
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
         sizes, betas, inverses, points, covariances = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
-        design, rhs = design[::-1], rhs[::-1]
-        self._after_fit(stamp, index, int(sizes[chosen]), betas[chosen], inverses[chosen],
-                        design, rhs, maps[::-1], t_break)
-        reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
-        if len(reference) and self._stamp[self._end - 1] == stamp:
-            k = reference[0]
-            self._measure_noise(stamp, index, design[0], rhs[0], betas[k], inverses[k])
+        beta = betas[chosen]
+        self._path = (stamp, beta, inverses[chosen], t_break)
+        if self._weights_guessed:
+            self._refresh_weights(stamp, beta, t_break)
+        if self._stamp[end - 1] == stamp:
+            # This frame's row in the event's coefficients: its residual for the impact gate
+            # and for the noise estimate.
+            weight = self._weight[end - 1]
+            row = self._rows[end - 1] @ position * weight
+            rhs = self._rhs[end - 1] * weight
+            self._residual[index] = (stamp, self._segment,
+                                     self._standardized(row, rhs, beta, inverses[chosen]))
+            depth = float(self._rotation[index, 2] @ (points[chosen] - self._center[index]))
+            self._depth[index] = depth
+            reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
+            if len(reference):
+                k = reference[0]
+                self._measure_noise(stamp, index, row, rhs, betas[k], inverses[k])
         return points[chosen]
 
+    def _window_system(self, stamp: int, first: int, end: int):
+        """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
+        stamps = self._stamp[first:end]
+        maps = self._position_map(stamps - stamp, None)
+        weight = self._weight[first:end, None, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
+        rhs = self._rhs[first:end] * weight[:, :, 0]
+        return (np.einsum('nri,nrj->ij', design, design)[None],
+                np.einsum('nri,nr->i', design, rhs)[None])
+
+    def _refresh_weights(self, stamp: int, beta: np.ndarray, t_break) -> None:
+        """Set the weights of a new flight's first frames from its first path."""
+        start, end = self._start, self._end
+        stamps = self._stamp[start:end]
+        positions = self._position_map(stamps - stamp, None if t_break is None
+                                       else stamps - t_break) @ beta
+        cameras = self._camera[start:end]
+        depth = np.einsum('ni,ni->n', positions - self._center[cameras],
+                          self._rotation[cameras, 2])
+        if np.all(depth > 0.0):
+            self._weight[start:end] = self._focal[cameras] / depth
+            self._rebuild(start)
+            self._weights_guessed = False
+
     @staticmethod
-    def _solve(gram, moment, sizes, columns):
+    def _solve(matrices, moments, sizes, columns):
         """Return (sizes, betas (K, 12), inverses (K, 12, 12)) of the windows, or None."""
-        if len(sizes) == 0:
+        keep = 2 * sizes > len(columns)  # more equations than unknowns
+        if not np.any(keep):
             return None
-        sizes = sizes[2 * sizes > len(columns)]  # more equations than unknowns
-        if len(sizes) == 0:
-            return None
-        matrices = gram[sizes - 1][:, columns][:, :, columns]
+        sizes = sizes[keep]
+        matrices = matrices[keep][:, columns][:, :, columns]
         try:
             inverses = np.linalg.inv(matrices)
         except np.linalg.LinAlgError:
@@ -664,7 +767,7 @@ class TrajectoryFuser:
             return None
         sizes, inverses = sizes[good], inverses[good]
         betas = np.zeros((len(sizes), 12))
-        betas[:, columns] = np.einsum('kij,kj->ki', inverses, moment[sizes - 1][:, columns])
+        betas[:, columns] = np.einsum('kij,kj->ki', inverses, moments[keep][good][:, columns])
         full = np.zeros((len(sizes), 12, 12))
         full[:, columns[:, None], columns[None, :]] = inverses
         return sizes, betas, full
@@ -696,41 +799,21 @@ class TrajectoryFuser:
         count = len(points)
         if count == 1:
             return 0
-        # difference[j, k] = X_k - X_j with covariance C_j - C_k (X_k the more efficient).
+        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
+        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
         difference = points[None, :, :] - points[:, None, :]
         ridge = np.eye(3) * 1e-12 * np.trace(covariances[0])
         spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
-        solved = np.linalg.solve(spread, difference[..., None])[..., 0]
-        statistic = np.einsum('jki,jki->jk', difference, solved)
-        # Where the difference of covariances is not positive (windows with and without an
-        # impact are not nested models), the shorter window's covariance bounds it.
-        shorter = np.linalg.solve(covariances + ridge, np.swapaxes(difference, 0, 1)[..., None])
-        shorter = np.einsum('kji,kji->jk', np.swapaxes(difference, 0, 1), shorter[..., 0])
+        statistic = np.einsum('jki,jki->jk', difference,
+                              np.linalg.solve(spread, difference[..., None])[..., 0])
+        # Where it is not positive (windows with and without an impact are not nested
+        # models) the shorter window's covariance C_j bounds it.
+        shorter = np.einsum('jki,jil,jkl->jk', difference, np.linalg.inv(covariances + ridge),
+                            difference)
         statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = statistic > self.consistency
-        bad &= np.triu(np.ones((count, count), dtype=bool), 1)  # j < k only
+        bad = (statistic > self.consistency) & np.triu(np.ones((count, count), dtype=bool), 1)
         failing = np.nonzero(np.any(bad, axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
-
-    def _after_fit(self, stamp, index, size, beta, inverse, design, rhs, maps,
-                   t_break) -> None:
-        """Store the path; update the weights, the noise estimate and the camera's residual."""
-        self._path = (stamp, beta, inverse, t_break)
-        end = self._end
-        start = end - size
-        # The window's depths from the fitted path: the weights f / depth of the next fit.
-        positions = maps[:size][::-1] @ beta  # (size, 3), oldest first
-        cameras = self._camera[start:end]
-        depth = np.einsum('ni,ni->n', positions - self._center[cameras],
-                          self._rotation[cameras, 2])
-        good = depth > 0.0
-        self._weight[start:end][good] = self._focal[cameras[good]] / depth[good]
-        if good[-1]:
-            self._depth[cameras[-1]] = depth[-1]
-        # This frame's standardized residual: the impact gate compares the next one with it.
-        if self._stamp[end - 1] == stamp:
-            self._residual[index] = (stamp, self._segment,
-                                     self._standardized(design[0], rhs[0], beta, inverse))
 
     @staticmethod
     def _standardized(row, rhs, beta, inverse) -> np.ndarray:
