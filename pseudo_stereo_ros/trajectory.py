@@ -107,11 +107,11 @@ __all__ = [
 ]
 
 #: Longest window considered [s].
-DEFAULT_MAX_WINDOW_S = 0.5
+DEFAULT_MAX_WINDOW_S = 0.6
 #: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.007).
 DEFAULT_CONSISTENCY = 12.0
 #: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
-DEFAULT_GATE = 30.0
+DEFAULT_GATE = 60.0
 #: Floor of the measured detection noise [px].
 DEFAULT_MIN_SIGMA_PX = 0.02
 #: Largest estimate standard deviation, in pixels of the newest camera per pixel of noise.
@@ -120,7 +120,7 @@ DEFAULT_MAX_UNCERTAINTY = 8.0
 # Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
 _SCALE_NS = 100_000_000
 # Window sizes [frames], nested, newest first; the largest bounds the work per event.
-_WINDOWS = np.array((5, 7, 10, 14, 20, 28, 40, 56, 80))
+_WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 # Frames kept (room for late observations).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
@@ -178,7 +178,7 @@ class TrajectoryFuser:
                  consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
-                 pending_estimate: str = 'predicted'):
+                 pending_estimate: str = 'impact'):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -203,7 +203,7 @@ class TrajectoryFuser:
         if order not in (1, 2):
             raise FuserConfigError(f'order must be 1 (constant velocity) or 2 (constant '
                                    f'acceleration), got {order!r}')
-        if pending_estimate not in ('predicted', 'ray', 'none'):
+        if pending_estimate not in ('predicted', 'impact', 'none'):
             raise FuserConfigError(f'unknown pending_estimate {pending_estimate!r}')
         self.max_window_ns = int(round(max_window_s * 1e9))
         self.consistency = float(consistency)
@@ -235,7 +235,7 @@ class TrajectoryFuser:
         self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
         #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
         #: (impacts), ``outlier`` (detections not fitted), ``predicted`` (estimates at pending
-        #: detections), and one key per drop reason.
+        #: detections), ``restarts`` (path lost, fitted afresh), and one key per drop reason.
         self.stats = Counter()
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px = None
@@ -524,9 +524,26 @@ class TrajectoryFuser:
         if pending is not None and stamp - pending[0] <= self.max_gap_ns:
             if self._confirm_break(frame):
                 return 'inserted'
-            self.stats['outlier'] += 1
+            # Two detections in a row off the path and not explained by an impact: the path
+            # is lost (or was wrong). Start it afresh from them, as at a new flight.
+            self._restart()
+            self._insert(pending)
+            self._insert(frame)
+            self.stats['restarts'] += 1
+            return 'inserted'
         self._pending = frame
         return 'pending'
+
+    def _restart(self) -> None:
+        """Drop the window and the path; keep the flight's timing and the measured noise."""
+        self._start = self._end
+        self._reference = None
+        self._weights_guessed = True
+        self._path = None
+        self._pending = None
+        self._break = None
+        self._break_range = None
+        self._segment += 1
 
     def _pending_estimate(self, frame) -> Optional[Estimate]:
         """Return the estimate at a pending detection's event: the predicted position."""
@@ -540,12 +557,20 @@ class TrajectoryFuser:
                 * self._focal[index] / depth <= self.max_uncertainty):
             self.stats['degenerate'] += 1  # the path is not known well enough to predict
             return None
-        if self.pending_estimate == 'ray':
+        if self.pending_estimate == 'impact':
+            # If the detection is the first after an impact on a horizontal surface (a table,
+            # the floor), the ball left the path vertically: the point of its ray nearest to
+            # the prediction, vertical offsets costing a ninth of horizontal ones; taken only
+            # if no farther from the prediction than reversing the ball's velocity since the
+            # last fitted frame could carry it.
             direction = np.cross(frame[2][0], frame[2][1])
             weights = np.array((9.0, 9.0, 1.0))
             offset = point - self._center[index]
-            point = self._center[index] + direction * float((offset * weights) @ direction) / \
+            on_ray = self._center[index] + direction * float((offset * weights) @ direction) / \
                 float((direction * weights) @ direction)
+            moved = float(np.linalg.norm(point - self._predict(int(self._stamp[self._end - 1]))[0]))
+            if float(np.linalg.norm(on_ray - point)) <= 2.0 * moved:
+                point = on_ray
         if not np.all(np.isfinite(point)):
             self.stats['degenerate'] += 1
             return None

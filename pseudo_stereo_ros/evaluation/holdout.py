@@ -195,7 +195,8 @@ def held_out_errors(camera: Camera, points: np.ndarray, pixels: np.ndarray) -> n
 def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], *,
             inputs: Sequence[str] = ('camera_1', 'camera_2'), held_out: str = 'camera_3',
             methods: Sequence[str] = HOLDOUT_METHODS, sync_tolerance_ns: Optional[int] = None,
-            max_gap_ns: Optional[int] = None) -> Dict[str, HoldoutResult]:
+            max_gap_ns: Optional[int] = None,
+            method_options: Optional[Mapping[str, dict]] = None) -> Dict[str, HoldoutResult]:
     """
     Score methods on two input cameras by reprojection into a held-out camera.
 
@@ -206,6 +207,7 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
     :param methods: names from :data:`HOLDOUT_METHODS`
     :param sync_tolerance_ns: the fuser's option (its default when None)
     :param max_gap_ns: the fuser's option, also the longest interpolation span here
+    :param method_options: method -> options of its fuser (see :func:`~.fusion.make_fuser`)
     :return: method -> result, all scored on the same held-out events
     """
     inputs = list(inputs)
@@ -232,7 +234,8 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
             stats = {}
         else:
             estimates, stats = fuse(pair, input_obs, method=method,
-                                    sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns)
+                                    sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                                    **(method_options or {}).get(method, {}))
             points = estimates_at(estimates, stamps, max_gap_ns=gap)
             stats = dict(stats)
         raw[method] = (held_out_errors(cameras[held_out], points, pixels), stats)
