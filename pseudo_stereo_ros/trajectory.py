@@ -146,6 +146,8 @@ _MAX_LEVERAGE = 0.5
 _SIGMA_MATURE = 10
 # Length of the fit whose residuals measure the noise [frames].
 _NOISE_WINDOW = 10
+# Velocity fits continue the chain of windows under a stricter bound (times consistency).
+_VELOCITY_CONSISTENCY = 0.5
 
 
 class TrajectoryFuser:
@@ -178,7 +180,7 @@ class TrajectoryFuser:
                  consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
-                 pending_estimate: str = 'impact'):
+                 pending_estimate: str = 'impact', velocity_windows: bool = True):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -212,6 +214,7 @@ class TrajectoryFuser:
         self.max_uncertainty = float(max_uncertainty)
         self.order = int(order)
         self.pending_estimate = pending_estimate
+        self.velocity_windows = bool(velocity_windows)
         self._names = names
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
@@ -704,11 +707,14 @@ class TrajectoryFuser:
         matrices = shift.T @ (self._prefix_gram[end] - self._prefix_gram[end - sizes]) @ shift
         moments = (self._prefix_moment[end] - self._prefix_moment[end - sizes]) @ shift
         fits = []
+        sizes_all, spans_all = sizes, np.zeros(len(sizes), dtype=bool)
+        matrices_plain, moments_plain = matrices, moments
         if self.order == 2 and count >= _WINDOWS[0]:
             if t_break is None:
                 fits.append(self._solve(matrices, moments, sizes, _CA))
             else:
-                spans = stamps[::-1][sizes - 1] < t_break
+                spans = spans_all = stamps[::-1][sizes - 1] < t_break
+                matrices_plain, moments_plain = matrices[~spans], moments[~spans]
                 fits.append(self._solve(matrices[~spans], moments[~spans], sizes[~spans], _CA))
                 fits.append(self._solve(matrices[spans], moments[spans], sizes[spans],
                                         np.arange(12)))
@@ -730,8 +736,20 @@ class TrajectoryFuser:
         sizes, betas, inverses, points, covariances = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
-        beta = betas[chosen]
-        self._path = (stamp, beta, inverses[chosen], t_break)
+        beta, inverse, point = betas[chosen], inverses[chosen], points[chosen]
+        if self.velocity_windows and self.order == 2 and count >= _WINDOWS[0] and \
+                self._sigma_count >= _SIGMA_MATURE:
+            # Constant velocity where the data cannot tell it from constant acceleration: the
+            # chain of windows goes on with velocity fits (less variance) while each agrees
+            # with every estimate before it.
+            plain = sizes_all if t_break is None else sizes_all[~spans_all]
+            cv = self._keep([self._solve(matrices_plain, moments_plain, plain, _CV)],
+                            position, index) if len(plain) else None
+            if cv is not None:
+                k = self._velocity_window(sizes, points, covariances * sigma2, cv, sigma2)
+                if k is not None and np.trace(cv[4][k]) < np.trace(covariances[chosen]):
+                    beta, inverse, point = cv[1][k], cv[2][k], cv[3][k]
+        self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
         if self._stamp[end - 1] == stamp:
@@ -741,14 +759,14 @@ class TrajectoryFuser:
             row = self._rows[end - 1] @ position * weight
             rhs = self._rhs[end - 1] * weight
             self._residual[index] = (stamp, self._segment,
-                                     self._standardized(row, rhs, beta, inverses[chosen]))
-            depth = float(self._rotation[index, 2] @ (points[chosen] - self._center[index]))
+                                     self._standardized(row, rhs, beta, inverse))
+            depth = float(self._rotation[index, 2] @ (point - self._center[index]))
             self._depth[index] = depth
             reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
             if len(reference):
                 k = reference[0]
                 self._measure_noise(stamp, index, row, rhs, betas[k], inverses[k])
-        return points[chosen]
+        return point
 
     def _window_system(self, stamp: int, first: int, end: int):
         """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
@@ -819,7 +837,37 @@ class TrajectoryFuser:
             return None
         return sizes[good], betas[good], inverses[good], points[good], covariances[good]
 
-    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
+    def _velocity_window(self, sizes, points, covariances, cv, sigma2):
+        """
+        Return the index (in ``cv``) of the longest acceptable velocity fit, or None.
+
+        A velocity window is acceptable when its estimate agrees with the acceleration
+        fit of the same window (Hausman's test: their difference has the covariance of
+        the acceleration fit less that of the velocity fit), and so does every shorter
+        one, and it agrees with every shorter velocity window (Lepski's rule).
+        """
+        cv_sizes, cv_points, cv_covariances = cv[0], cv[3], cv[4] * sigma2
+        same = {int(size): k for k, size in enumerate(sizes)}
+        bound = self.consistency * _VELOCITY_CONSISTENCY
+        chosen = None
+        for k, size in enumerate(cv_sizes):
+            j = same.get(int(size))
+            if j is None:
+                break
+            difference = points[j] - cv_points[k]
+            spread = covariances[j] - 0.9 * cv_covariances[k]
+            try:
+                statistic = float(difference @ np.linalg.solve(spread, difference))
+            except np.linalg.LinAlgError:
+                break
+            if not 0.0 <= statistic <= bound:
+                break
+            if k and self._lepski(cv_points[:k + 1], cv_covariances[:k + 1]) != k:
+                break
+            chosen = k
+        return chosen
+
+    def _lepski(self, points: np.ndarray, covariances: np.ndarray, bound=None) -> int:
         """Return the index of the longest window consistent with every shorter one."""
         count = len(points)
         if count == 1:
@@ -836,7 +884,8 @@ class TrajectoryFuser:
         shorter = np.einsum('jki,jil,jkl->jk', difference, np.linalg.inv(covariances + ridge),
                             difference)
         statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = (statistic > self.consistency) & np.triu(np.ones((count, count), dtype=bool), 1)
+        bound = self.consistency if bound is None else bound
+        bad = (statistic > bound) & np.triu(np.ones((count, count), dtype=bool), 1)
         failing = np.nonzero(np.any(bad, axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
 
