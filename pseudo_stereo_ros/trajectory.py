@@ -148,6 +148,11 @@ _SIGMA_MATURE = 10
 _NOISE_WINDOW = 10
 # Velocity fits continue the chain of windows under a stricter bound (times consistency).
 _VELOCITY_CONSISTENCY = 0.5
+# Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
+_CV_MIN = 3
+# An impact estimate needs the detection off the prediction within this sine of vertical.
+_VERTICAL_SINE = 0.5
+_IMPACT_REACH = 5.0
 
 
 class TrajectoryFuser:
@@ -180,7 +185,7 @@ class TrajectoryFuser:
                  consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
-                 pending_estimate: str = 'impact', velocity_windows: bool = True):
+                 pending_estimate: str = 'impact', velocity_windows: bool = False):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -564,15 +569,21 @@ class TrajectoryFuser:
             # If the detection is the first after an impact on a horizontal surface (a table,
             # the floor), the ball left the path vertically: the point of its ray nearest to
             # the prediction, vertical offsets costing a ninth of horizontal ones; taken only
-            # if no farther from the prediction than reversing the ball's velocity since the
-            # last fitted frame could carry it.
+            # if the detection moved off the prediction along the image of the vertical
+            # (within 30 degrees) and by no more than reversing the ball's velocity since the
+            # last fitted frame could carry it.  Otherwise (a stray detection) the prediction.
+            found = self._innovation(index, frame[2], frame[3], point)
+            vertical = None if found is None else found[1][:, 2]
+            if found is None or abs(found[0][0] * vertical[1] - found[0][1] * vertical[0]) > \
+                    _VERTICAL_SINE * float(np.linalg.norm(found[0]) * np.linalg.norm(vertical)):
+                vertical = None
             direction = np.cross(frame[2][0], frame[2][1])
             weights = np.array((9.0, 9.0, 1.0))
             offset = point - self._center[index]
             on_ray = self._center[index] + direction * float((offset * weights) @ direction) / \
                 float((direction * weights) @ direction)
             moved = float(np.linalg.norm(point - self._predict(int(self._stamp[self._end - 1]))[0]))
-            if float(np.linalg.norm(on_ray - point)) <= 2.0 * moved:
+            if vertical is not None and float(np.linalg.norm(on_ray - point)) <= _IMPACT_REACH * moved:
                 point = on_ray
         if not np.all(np.isfinite(point)):
             self.stats['degenerate'] += 1
@@ -600,11 +611,19 @@ class TrajectoryFuser:
         # Two frames after the impact cannot place it: halfway before the pending frame
         # until later frames refine it (a time chosen by the residual now would be the one
         # that leaves the jump least determined).
-        middle = (int(self._stamp[end - 1]) + high) // 2
-        best = self._refine_break((stamps, rows, rhs, weights), int(frame[0]), middle, middle)
+        best = None
+        for earlier, later in ((end - 1, None), (end - 2, end - 1)):
+            if earlier < first:
+                continue
+            later = high if later is None else int(self._stamp[later])
+            middle = (int(self._stamp[earlier]) + later) // 2
+            found = self._refine_break((stamps, rows, rhs, weights), int(frame[0]), middle,
+                                       middle, with_rss=True)
+            if found is not None and (best is None or found[0] < best[0]):
+                best = found
         if best is None:
             return False
-        t_break, beta = best
+        _, t_break, beta = best
         # The jump must explain both new frames: their residuals within the gate, or at
         # least ten times smaller (squared) than without it (the impact time is only known
         # to a grid step until later frames refine it).
@@ -630,7 +649,7 @@ class TrajectoryFuser:
         self.stats['breaks'] += 1
         return True
 
-    def _refine_break(self, frames, stamp: int, low: int, high: int):
+    def _refine_break(self, frames, stamp: int, low: int, high: int, *, with_rss=False):
         """Return (impact stamp, beta) minimizing the fit's residual over a grid, or None."""
         stamps, rows, rhs, weights = frames
         if low == high:
@@ -656,7 +675,9 @@ class TrajectoryFuser:
             rss = float(residual @ residual)
             if best is None or rss < best[0]:
                 best = (rss, int(t_break), beta)
-        return None if best is None else best[1:]
+        if best is None:
+            return None
+        return best if with_rss else best[1:]
 
     # -- the fit --------------------------------------------------------------------------------
 
@@ -721,7 +742,7 @@ class TrajectoryFuser:
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept = self._keep(fits, position, index)
         after = count if t_break is None else int(np.count_nonzero(stamps > t_break))
-        if kept is None and after >= 3:
+        if kept is None and after >= _CV_MIN:
             # Too few frames for constant acceleration (a flight's first frames): velocity,
             # never across an impact.
             if after == count:
