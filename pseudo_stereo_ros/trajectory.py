@@ -15,76 +15,77 @@
 r"""
 The ``trajectory`` method: a causal fit of the ball's path to the rays of all cameras.
 
-At every shutter event of any camera the ball's path over a short sliding
-window is fitted to the viewing rays of *every* camera, each at its own
-stamp, and evaluated at the event's stamp: an estimate per shutter event,
-immediately, with no look-ahead.
+At every shutter event of any camera the ball's path over a sliding window
+is fitted to the viewing rays of *every* camera, each at its own stamp, and
+evaluated at the event's stamp: an estimate per shutter event, immediately,
+with no look-ahead.  Any number of cameras (two or more) enter the same fit.
 
 **Model.**  Over the window the path is a polynomial per axis,
 ``X(t) = sum_k beta_k ((t - t_event) / 0.1 s)^k`` with ``k <= 2`` (constant
 acceleration: gravity, drag and, locally, curves), plus, when an impact lies
-inside the window, a velocity jump ``dV * max(0, t - t_break)`` (position
+inside the window, a velocity jump ``dV * max(0, t - t_impact)`` (position
 continuous at the impact).  A detection ``(x, y)`` (undistorted, normalized)
 of a camera with rotation rows ``r1, r2, r3`` and centre ``c`` gives two
 equations linear in the coefficients, the pinhole projection multiplied out:
 ``(r1 - x r3) . (X(t) - c) = 0`` and ``(r2 - y r3) . (X(t) - c) = 0``.  Each is
-weighted by ``f / depth``, so residuals are reprojection errors in pixels and
-the solution is the least-squares fit in the image (a small normal-equation
-system, 9 or 12 unknowns).
+weighted by ``f / depth`` (the depth predicted when the frame arrives), so
+residuals are reprojection errors in pixels.  Each frame's normal matrix is
+added once to prefix sums kept in the coefficients of a fixed reference
+stamp; a window's system is a difference of two prefixes, moved to the
+event's stamp by a linear change of the time origin: one frame's work per
+event, whatever the window.
 
-**Window.**  Fits over nested windows of the newest 5, 7, 10, 14, ...
-frames (at most ``max_window_s``) are all computed at once from cumulative
-normal matrices.  The window is chosen at each event by Lepski's rule: the
-longest window whose estimate agrees with that of every shorter window within
-``consistency`` (a chi-square bound on their difference, whose covariance is
-the difference of their covariances).  Longer windows average more noise
-until the model's bias (a curve a parabola cannot follow) shows as
-disagreement, so the window adapts to the frame rate, the noise and the
-motion by itself: long on a straight line or a parabola, short on a tight
-circle.  Lepski's rule needs the detection noise ``sigma``; it is measured
-online from the difference of consecutive standardized residuals of each
-camera (Rice's estimator), which cancels slowly varying biases such as an
-inconsistent calibration and never falls below ``min_sigma_px``.  Before a
-constant-acceleration fit is possible (the first frames of a flight) a
-constant-velocity fit over all frames serves.
+**Window.**  Fits over nested windows of the newest 6, 9, 13, 19, 28, 40
+and 60 frames (at most ``max_window_s``) are solved together.  The window is
+chosen at each event by Lepski's rule: the longest window whose estimate
+agrees with that of every shorter one within ``consistency`` (a chi-square
+bound; for nested fits the difference has the difference of their
+covariances).  Longer windows average more noise until the model's bias (a
+curve a parabola cannot follow, a missed impact) shows as disagreement, so
+the window follows the frame rate, the noise and the motion by itself: long
+on a straight line or a parabola, short on a tight circle.  Lepski's rule
+needs the detection noise; it is measured online (:attr:`sigma_px`) from the
+difference of consecutive standardized residuals of each camera in a fit of
+fixed length (Rice's estimator: the systematic part of a residual, a
+calibration bias or the curvature a parabola misses at the window's end, is
+nearly the same at consecutive frames and cancels; the noise does not),
+averaged in the log domain so that rare large samples do not inflate it, and
+never below ``min_sigma_px``.  Before a constant-acceleration fit is possible
+(a flight's first frames) a constant-velocity fit of all frames serves.
 
 **Impacts and outliers.**  A new detection is compared with the path
-predicted from the previous event: its innovation minus that camera's last
-residual (again cancelling slow biases), over its expected spread (noise,
-prediction covariance and the recent spread of such innovations).  Beyond
-``gate`` (a chi-square value for 2 degrees of freedom) it is *pending*: not
-fitted, and its event's estimate is the predicted position (kind
-``'predicted'``).  If the next detection (any camera) is consistent with the
-path, the pending one was an outlier (counted as ``outlier``).  If it is
-inconsistent too and a path with a velocity jump between the last consistent
-detections and the pending one explains both, the impact is confirmed
-(``breaks``): both enter the fit with the jump, whose time is searched on a
-grid and refined during the next few frames.  Windows that reach back past
-the impact carry the jump; frames before an earlier impact are dropped.
+predicted from the previous event: its innovation less that camera's last
+residual (slow biases cancel again), over its expected spread (noise,
+prediction covariance, and the running spread of accepted innovations).  No
+detection is gated before the noise is known (ten samples: a wrongly low
+noise makes false impacts).  Beyond ``gate`` (chi-square, 2 d.o.f.) the
+detection is *pending*: not fitted, and its event's estimate (kind
+``'predicted'``) is the predicted position, or, when the detection moved off
+it along the image of the vertical by no more than an impact could carry the
+ball since the last frame, the point of its ray nearest to the prediction
+with vertical offsets preferred (the first frame after a bounce on a table or
+floor).  If the next detection of any camera agrees with the path, the
+pending one was an outlier (``outlier``).  If it disagrees too and a path with
+a velocity jump explains both (their residuals within the gate, or ten times
+smaller than without the jump), the impact is confirmed (``breaks``): both
+are fitted with the jump, placed halfway into one of the last two intervals
+before the pending frame, and its time is refined on a grid over the next six
+frames.  Windows that reach back past the impact carry the jump; frames
+before an earlier impact are dropped.  Two disagreeing detections that no jump
+explains mean the path is lost: the fit restarts from them (``restarts``).
 
-**Conditioning.**  An estimate whose standard deviation (from the fit's
-covariance) exceeds ``max_uncertainty`` times the newest camera's pixel
-footprint (depth / f per pixel of noise) is not published (``degenerate``):
-this is what happens when one camera stops seeing the ball and its last rays
-are extrapolated.  Estimates need two cameras with a detection within
-``max_gap_ns``, as for the paper's method.
+**Conditioning.**  A fit whose estimate has a standard deviation above
+``max_uncertainty`` pixels of the newest camera per pixel of noise is not
+used (when one camera stops seeing the ball, its last rays would be
+extrapolated); with no usable fit there is no estimate (``degenerate``).
+Estimates need two cameras with a detection within ``max_gap_ns``, as for the
+paper's method.
 
 Input handling (camera, stamp, finite pixel, duplicates, sessions and
-gaps) is one call, :meth:`TrajectoryFuser._admit`, applying the same rules
-as :class:`pseudo_stereo_ros.fusion.Fuser` with the same drop reasons.
+gaps) is one call, :meth:`TrajectoryFuser._admit`, with the rules and drop
+reasons of :class:`pseudo_stereo_ros.fusion.Fuser`.
 """
 
-from collections import Counter
-import math
-import operator
-from typing import Iterable, List, Mapping, Optional, Sequence, Union
-
-import numpy as np
-
-from .camera import Camera
-from .errors import FuserConfigError
-from .fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
-from .records import Estimate, Observation
 from collections import Counter
 import math
 import operator
@@ -582,8 +583,9 @@ class TrajectoryFuser:
             offset = point - self._center[index]
             on_ray = self._center[index] + direction * float((offset * weights) @ direction) / \
                 float((direction * weights) @ direction)
-            moved = float(np.linalg.norm(point - self._predict(int(self._stamp[self._end - 1]))[0]))
-            if vertical is not None and float(np.linalg.norm(on_ray - point)) <= _IMPACT_REACH * moved:
+            last = self._predict(int(self._stamp[self._end - 1]))[0]
+            reach = _IMPACT_REACH * float(np.linalg.norm(point - last))
+            if vertical is not None and float(np.linalg.norm(on_ray - point)) <= reach:
                 point = on_ray
         if not np.all(np.isfinite(point)):
             self.stats['degenerate'] += 1

@@ -211,7 +211,7 @@ def format_table1(results: Dict) -> str:
         lines.append(text)
     lines.append('proposed*, trajectory*: delta12 = 1/90 s, delta21 = 2/90 s; all others '
                  'delta12 = delta21.')
-    lines.append('trajectory: not in the paper; the causal fit of both cameras\' rays '
+    lines.append("trajectory: not in the paper; the causal fit of both cameras' rays "
                  '(method trajectory).')
     lines.append("fps: the paper's label. Two 30 fps cameras at an offset give an estimate at "
                  'each of the 60 shutter events per second,')

@@ -41,8 +41,8 @@ from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
 from .node_tools import declare, load_cameras, run_node, StartupError
 from ..fusion import DROP_REASONS, make_fuser, METHODS
 from ..records import Observation
-from ..trajectory import DEFAULT_MAX_WINDOW_S
 from ..reorder import ReorderBuffer
+from ..trajectory import DEFAULT_MAX_WINDOW_S
 
 __all__ = ['FuserNode', 'main']
 
@@ -106,8 +106,9 @@ class FuserNode(Node):
         order = declare(self, 'trajectory_order', 2,
                         'method trajectory: 2 constant acceleration, 1 constant velocity',
                         min_value=1, max_value=2, read_only=True)
-        options = {} if method != 'trajectory' else {'max_window_s': path_window_s,
-                                                       'order': order}
+        options = {}
+        if method == 'trajectory':
+            options = {'max_window_s': path_window_s, 'order': order}
         try:
             self.fuser = make_fuser(self.cameras, method=method,
                                     sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
