@@ -252,7 +252,7 @@ def test_real_data_within_the_oracle_floor(lfg_results, session):
     assert ours.available >= paper.available  # at least as many camera_3 events scored
 
 
-@pytest.mark.xfail(strict=True, reason="issue 11 bar not reached: 5 gross errors (> 20 px) "
+@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: 5 gross errors (> 20 px) '
                    "against the oracle's 2 on the common events; three of them are 10-17 ms "
                    'into a flight, where the oracle is at 15-18 px too')
 def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
