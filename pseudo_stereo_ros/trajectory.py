@@ -127,13 +127,18 @@ _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
 _CA = np.arange(9)
+# Entries of the change of time origin (tau -> tau - delta) in the coefficients: per axis
+# (a0, a1) = -delta, (a0, a2) = delta^2, (a1, a2) = -2 delta.
+_SHIFT_ROWS = np.array((0, 0, 1, 3, 3, 4, 6, 6, 7))
+_SHIFT_COLUMNS = np.array((1, 2, 2, 4, 5, 5, 7, 8, 8))
 _CV = np.array((0, 1, 3, 4, 6, 7))
 _POSITION = np.array((0, 3, 6))
 _JUMP = np.arange(9, 12)
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
-# The prefix sums' reference stamp moves when the newest frame is this far from it [ns].
+# The prefix sums' reference stamp moves when the newest frame is this much farther from it
+# than the longest window [ns].
 _REANCHOR_NS = 400_000_000
 _BREAK_GRID = 9
 # Smoothing of the running innovation spread and of Rice's noise estimate; the clip of one
@@ -147,8 +152,6 @@ _MAX_LEVERAGE = 0.5
 _SIGMA_MATURE = 10
 # Length of the fit whose residuals measure the noise [frames].
 _NOISE_WINDOW = 10
-# Velocity fits continue the chain of windows under a stricter bound (times consistency).
-_VELOCITY_CONSISTENCY = 0.5
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
 _CV_MIN = 3
 # An impact estimate needs the detection off the prediction within this sine of vertical.
@@ -186,7 +189,7 @@ class TrajectoryFuser:
                  consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
-                 pending_estimate: str = 'impact', velocity_windows: bool = False):
+                 pending_estimate: str = 'impact'):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -220,7 +223,6 @@ class TrajectoryFuser:
         self.max_uncertainty = float(max_uncertainty)
         self.order = int(order)
         self.pending_estimate = pending_estimate
-        self.velocity_windows = bool(velocity_windows)
         self._names = names
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
@@ -340,16 +342,17 @@ class TrajectoryFuser:
         rotation = self._rotation[index]
         rows = np.array((rotation[0] - x * rotation[2], rotation[1] - y * rotation[2]))
         depth = self._depth[index]
+        prediction = None
         if self._path is not None:
-            point = self._predict(stamp)[0]
-            predicted = float(rotation[2] @ (point - self._center[index]))
+            prediction = self._predict(stamp)
+            predicted = float(rotation[2] @ (prediction[0] - self._center[index]))
             if predicted > 0.0:
                 depth = predicted
         frame = (stamp, index, rows, rows @ self._center[index], self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         else:
-            verdict = self._check(frame)
+            verdict = self._check(frame, prediction)
             if verdict == 'pending':
                 return self._pending_estimate(frame)
             if verdict == 'inserted':
@@ -412,7 +415,8 @@ class TrajectoryFuser:
         start += int(np.searchsorted(self._stamp[start:self._end],
                                      self._stamp[self._end - 1] - self.max_window_ns))
         self._start = min(start, self._end - 1)
-        if self._reference is None or self._stamp[self._end - 1] - self._reference > _REANCHOR_NS:
+        if self._reference is None or \
+                self._stamp[self._end - 1] - self._reference > self.max_window_ns + _REANCHOR_NS:
             self._reference = int(self._stamp[self._start])
             rebuild = self._start
         if rebuild is None:
@@ -497,13 +501,13 @@ class TrajectoryFuser:
 
     # -- impacts and outliers -------------------------------------------------------------------
 
-    def _check(self, frame) -> str:
+    def _check(self, frame, prediction) -> str:
         """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
         stamp, index, rows, rhs, _ = frame
-        if self._path is None or self._break_range is not None or \
+        if prediction is None or self._break_range is not None or \
                 self._sigma_count < _SIGMA_MATURE:
             return 'ok'  # no path yet, an impact being placed, or the noise not known yet
-        point, covariance = self._predict(stamp)
+        point, covariance = prediction
         found = self._innovation(index, rows, rhs, point)
         statistic = math.inf
         if found is not None:
@@ -724,25 +728,21 @@ class TrajectoryFuser:
             sizes = sizes[-1:]
         delta = (stamp - self._reference) / _SCALE_NS
         shift = np.eye(12)
-        for axis in range(3):
-            block = shift[3 * axis:3 * axis + 3, 3 * axis:3 * axis + 3]
-            block[0, 1], block[0, 2], block[1, 2] = -delta, delta * delta, -2.0 * delta
+        shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
         matrices = shift.T @ (self._prefix_gram[end] - self._prefix_gram[end - sizes]) @ shift
         moments = (self._prefix_moment[end] - self._prefix_moment[end - sizes]) @ shift
-        fits = []
-        sizes_all, spans_all = sizes, np.zeros(len(sizes), dtype=bool)
-        matrices_plain, moments_plain = matrices, moments
+        position = self._position_row(0, None if t_break is None else stamp - t_break)
+        kept = None
         if self.order == 2 and count >= _WINDOWS[0]:
             if t_break is None:
-                fits.append(self._solve(matrices, moments, sizes, _CA))
+                kept = self._fits(matrices, moments, sizes, 9, position, index)
             else:
-                spans = spans_all = stamps[::-1][sizes - 1] < t_break
-                matrices_plain, moments_plain = matrices[~spans], moments[~spans]
-                fits.append(self._solve(matrices[~spans], moments[~spans], sizes[~spans], _CA))
-                fits.append(self._solve(matrices[spans], moments[spans], sizes[spans],
-                                        np.arange(12)))
-        position = self._position_row(0, None if t_break is None else stamp - t_break)
-        kept = self._keep(fits, position, index)
+                spans = stamps[::-1][sizes - 1] < t_break
+                kept = self._merge(
+                    self._fits(matrices[~spans], moments[~spans], sizes[~spans], 9, position,
+                               index),
+                    self._fits(matrices[spans], moments[spans], sizes[spans], 12, position,
+                               index))
         after = count if t_break is None else int(np.count_nonzero(stamps > t_break))
         if kept is None and after >= _CV_MIN:
             # Too few frames for constant acceleration (a flight's first frames): velocity,
@@ -751,27 +751,16 @@ class TrajectoryFuser:
                 system = (matrices[-1:], moments[-1:])
             else:
                 system = self._window_system(stamp, end - after, end)
-            kept = self._keep([self._solve(system[0], system[1], np.array((after,)), _CV)],
-                              position, index)
+            kept = self._fits(system[0][:, _CV][:, :, _CV], system[1][:, _CV],
+                              np.array((after,)), _CV, position, index)
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, betas, inverses, points, covariances = kept
+        sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
-        beta, inverse, point = betas[chosen], inverses[chosen], points[chosen]
-        if self.velocity_windows and self.order == 2 and count >= _WINDOWS[0] and \
-                self._sigma_count >= _SIGMA_MATURE:
-            # Constant velocity where the data cannot tell it from constant acceleration: the
-            # chain of windows goes on with velocity fits (less variance) while each agrees
-            # with every estimate before it.
-            plain = sizes_all if t_break is None else sizes_all[~spans_all]
-            cv = self._keep([self._solve(matrices_plain, moments_plain, plain, _CV)],
-                            position, index) if len(plain) else None
-            if cv is not None:
-                k = self._velocity_window(sizes, points, covariances * sigma2, cv, sigma2)
-                if k is not None and np.trace(cv[4][k]) < np.trace(covariances[chosen]):
-                    beta, inverse, point = cv[1][k], cv[2][k], cv[3][k]
+        beta, inverse = self._full(*solutions[chosen])
+        point = points[chosen]
         self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
@@ -787,8 +776,8 @@ class TrajectoryFuser:
             self._depth[index] = depth
             reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
             if len(reference):
-                k = reference[0]
-                self._measure_noise(stamp, index, row, rhs, betas[k], inverses[k])
+                self._measure_noise(stamp, index, row, rhs,
+                                    *self._full(*solutions[reference[0]]))
         return point
 
     def _window_system(self, stamp: int, first: int, end: int):
@@ -815,82 +804,70 @@ class TrajectoryFuser:
             self._rebuild(start)
             self._weights_guessed = False
 
-    @staticmethod
-    def _solve(matrices, moments, sizes, columns):
-        """Return (sizes, betas (K, 12), inverses (K, 12, 12)) of the windows, or None."""
+    def _fits(self, matrices, moments, sizes, columns, position, index):
+        """
+        Solve window systems; keep the determined, well-conditioned ones.
+
+        :param matrices: (K, 12, 12) normal matrices at the event, ``moments`` (K, 12)
+        :param sizes: (K,) window sizes [frames]
+        :param columns: the unknowns: a count (the first 9 or 12 coefficients) or an index
+            array (already applied to ``matrices`` and ``moments``)
+        :param position: (3, 12) map from the coefficients to the position at the event
+        :param index: the event's camera
+        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, solutions)``
+            with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        """
+        if isinstance(columns, int):
+            count, columns = columns, np.arange(columns)
+            matrices, moments = matrices[:, :count, :count], moments[:, :count]
         keep = 2 * sizes > len(columns)  # more equations than unknowns
         if not np.any(keep):
             return None
-        sizes = sizes[keep]
-        matrices = matrices[keep][:, columns][:, :, columns]
+        sizes, matrices, moments = sizes[keep], matrices[keep], moments[keep]
         try:
             inverses = np.linalg.inv(matrices)
         except np.linalg.LinAlgError:
             return None
-        identity = np.eye(len(columns))
-        good = np.all(np.abs(matrices @ inverses - identity) < 1e-6, axis=(1, 2))
-        if not np.any(good):
-            return None
-        sizes, inverses = sizes[good], inverses[good]
-        betas = np.zeros((len(sizes), 12))
-        betas[:, columns] = np.einsum('kij,kj->ki', inverses, moments[keep][good][:, columns])
-        full = np.zeros((len(sizes), 12, 12))
-        full[:, columns[:, None], columns[None, :]] = inverses
-        return sizes, betas, full
-
-    def _keep(self, fits, position, index):
-        """Keep the well-conditioned fits; return their positions and covariances."""
-        fits = [fit for fit in fits if fit is not None]
-        if not fits:
-            return None
-        sizes = np.concatenate([fit[0] for fit in fits])
-        betas = np.concatenate([fit[1] for fit in fits])
-        inverses = np.concatenate([fit[2] for fit in fits])
-        order = np.argsort(sizes, kind='stable')
-        sizes, betas, inverses = sizes[order], betas[order], inverses[order]
-        points = betas @ position.T  # (K, 3)
-        covariances = np.einsum('im,kmn,jn->kij', position, inverses, position)
+        # A (numerically) singular system leaves M M^-1 far from the identity.
+        unit = np.einsum('kij,kji->ki', matrices, inverses)
+        betas = np.einsum('kij,kj->ki', inverses, moments)
+        selector = position[:, columns]
+        points = betas @ selector.T
+        covariances = selector @ inverses @ selector.T
         depth = (points - self._center[index]) @ self._rotation[index, 2]
         variance = np.trace(covariances, axis1=1, axis2=2)
         with np.errstate(invalid='ignore', divide='ignore'):
             footprint = np.sqrt(variance) * self._focal[index] / depth
-        good = (depth > 0.0) & (variance > 0.0) & (footprint <= self.max_uncertainty) & \
+        good = np.all(np.abs(unit - 1.0) < 1e-6, axis=1) & (depth > 0.0) & \
+            (variance > 0.0) & (footprint <= self.max_uncertainty) & \
             np.all(np.isfinite(points), axis=1)
         if not np.any(good):
             return None
-        return sizes[good], betas[good], inverses[good], points[good], covariances[good]
+        good = np.nonzero(good)[0]
+        return (sizes[good], points[good], covariances[good],
+                [(columns, betas[k], inverses[k]) for k in good])
 
-    def _velocity_window(self, sizes, points, covariances, cv, sigma2):
-        """
-        Return the index (in ``cv``) of the longest acceptable velocity fit, or None.
+    @staticmethod
+    def _merge(first, second):
+        """Merge two results of :meth:`_fits` in order of window size."""
+        if first is None or second is None:
+            return second if first is None else first
+        sizes = np.concatenate((first[0], second[0]))
+        order = np.argsort(sizes, kind='stable')
+        return (sizes[order], np.concatenate((first[1], second[1]))[order],
+                np.concatenate((first[2], second[2]))[order],
+                [(first[3] + second[3])[k] for k in order])
 
-        A velocity window is acceptable when its estimate agrees with the acceleration
-        fit of the same window (Hausman's test: their difference has the covariance of
-        the acceleration fit less that of the velocity fit), and so does every shorter
-        one, and it agrees with every shorter velocity window (Lepski's rule).
-        """
-        cv_sizes, cv_points, cv_covariances = cv[0], cv[3], cv[4] * sigma2
-        same = {int(size): k for k, size in enumerate(sizes)}
-        bound = self.consistency * _VELOCITY_CONSISTENCY
-        chosen = None
-        for k, size in enumerate(cv_sizes):
-            j = same.get(int(size))
-            if j is None:
-                break
-            difference = points[j] - cv_points[k]
-            spread = covariances[j] - 0.9 * cv_covariances[k]
-            try:
-                statistic = float(difference @ np.linalg.solve(spread, difference))
-            except np.linalg.LinAlgError:
-                break
-            if not 0.0 <= statistic <= bound:
-                break
-            if k and self._lepski(cv_points[:k + 1], cv_covariances[:k + 1]) != k:
-                break
-            chosen = k
-        return chosen
+    @staticmethod
+    def _full(columns, beta, inverse):
+        """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
+        full_beta = np.zeros(12)
+        full_beta[columns] = beta
+        full_inverse = np.zeros((12, 12))
+        full_inverse[np.ix_(columns, columns)] = inverse
+        return full_beta, full_inverse
 
-    def _lepski(self, points: np.ndarray, covariances: np.ndarray, bound=None) -> int:
+    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
         """Return the index of the longest window consistent with every shorter one."""
         count = len(points)
         if count == 1:
@@ -902,13 +879,14 @@ class TrajectoryFuser:
         spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
         statistic = np.einsum('jki,jki->jk', difference,
                               np.linalg.solve(spread, difference[..., None])[..., 0])
-        # Where it is not positive (windows with and without an impact are not nested
-        # models) the shorter window's covariance C_j bounds it.
-        shorter = np.einsum('jki,jil,jkl->jk', difference, np.linalg.inv(covariances + ridge),
-                            difference)
-        statistic = np.where(statistic > 0.0, statistic, shorter)
-        bound = self.consistency if bound is None else bound
-        bad = (statistic > bound) & np.triu(np.ones((count, count), dtype=bool), 1)
+        if np.any(statistic <= 0.0):
+            # Not positive where the difference of covariances is not (windows with and
+            # without an impact are not nested models): the shorter window's covariance
+            # C_j bounds it.
+            shorter = np.einsum('jki,jil,jkl->jk', difference,
+                                np.linalg.inv(covariances + ridge), difference)
+            statistic = np.where(statistic > 0.0, statistic, shorter)
+        bad = (statistic > self.consistency) & np.triu(np.ones((count, count), dtype=bool), 1)
         failing = np.nonzero(np.any(bad, axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
 
