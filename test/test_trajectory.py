@@ -32,7 +32,7 @@ import numpy as np
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main
 from pseudo_stereo_ros.errors import FuserConfigError
-from pseudo_stereo_ros.evaluation.holdout import estimates_at, holdout
+from pseudo_stereo_ros.evaluation.holdout import holdout, three_camera_consistency
 from pseudo_stereo_ros.evaluation.sweep import (Case, impact_errors, impact_times, make_rig,
                                                 run_case, simulate_case, small_cases,
                                                 summarize)
@@ -261,26 +261,16 @@ def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
     assert ours <= 2 * oracle
 
 
-def test_real_data_three_cameras_consistent_with_two(lfg):
+def test_real_data_three_cameras_consistent_with_two(lfg, lfg_results):
     # With camera_3 as an input it cannot judge itself: consistency instead.  At camera_3's
     # own stamps the three-camera estimate reprojects into camera_3 within the detection
-    # noise (it fits that detection), and it lies within a few camera_3 pixels of the
-    # two-camera estimate (cameras 1 + 2, interpolated to the same stamps, ~1.5 px from the
-    # detection): the extra camera moves the estimate by about the two-camera error, no more.
+    # noise (~0.7 px: it fits that detection), and lies from the two-camera estimate by no
+    # more than the two-camera run's held-out error plus that residual (triangle
+    # inequality in camera_3's image); it covers every camera_3 event the pair covers.
     cameras, data = lfg
     for session, observations in data.items():
-        three, _ = fuse([cameras[n] for n in LFG_CAMERAS], observations, method='trajectory')
-        at3 = [e for e in three if e.camera == 'camera_3']
-        detections = {o.stamp_ns: (o.u, o.v) for o in observations if o.camera == 'camera_3'}
-        stamps = np.array([e.stamp_ns for e in at3], dtype=np.int64)
-        pixels = np.array([detections[stamp] for stamp in stamps])
-        projected = cameras['camera_3'].project(positions_array(at3))
-        assert np.median(np.linalg.norm(projected - pixels, axis=1)) < 1.0, session
-        pair = [cameras['camera_1'], cameras['camera_2']]
-        two, _ = fuse(pair, [o for o in observations if o.camera != 'camera_3'],
-                      method='trajectory')
-        between = cameras['camera_3'].project(estimates_at(two, stamps)) - projected
-        distance = np.linalg.norm(between, axis=1)
-        distance = distance[np.isfinite(distance)]
-        assert len(distance) > 40, session
-        assert np.median(distance) < 3.0, (session, np.median(distance))
+        values = three_camera_consistency(cameras, observations)
+        two = lfg_results[session]['trajectory']
+        assert values['self_px'] < 1.0, (session, values)
+        assert values['between_px'] <= two.median_px + values['self_px'], (session, values)
+        assert values['events'] >= two.available, (session, values)
