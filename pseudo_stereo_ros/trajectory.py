@@ -275,6 +275,8 @@ class TrajectoryFuser:
         self._segment = 0  # counts impacts: residuals are compared within a segment only
         self._spread = None  # running spread of accepted innovations, per axis [px^2]
         self._residual = {}  # camera index -> (stamp, segment, standardized residual (2,))
+        self._rejected = {}  # camera index -> stamp of its last detection taken as an outlier
+        self._previous = {}  # camera index -> stamp of its detection before the newest
         self._noise_residual = {}  # the same from the noise estimate's fixed-length fit
 
     # -- input ----------------------------------------------------------------------------------
@@ -319,6 +321,7 @@ class TrajectoryFuser:
         if not (math.isfinite(x) and math.isfinite(y)):
             stats['undistort_failed'] += 1
             return None
+        self._previous[index] = self._last.get(camera)
         self._last[camera] = stamp
         late = newest is not None and stamp < newest
         if not late:
@@ -532,7 +535,18 @@ class TrajectoryFuser:
         if statistic <= self.gate:
             if pending is not None:
                 self.stats['outlier'] += 1  # the path goes on: the pending one was stray
+                self._rejected[pending[1]] = (pending[0], self._pending_innovation)
                 self._pending = None
+            return 'ok'
+        rejected = self._rejected.get(index)
+        if found is not None and rejected is not None and \
+                rejected[0] == self._previous.get(index) and rejected[1] is not None and \
+                float(np.linalg.norm(found[0] - rejected[1])) < \
+                0.5 * float(np.linalg.norm(found[0])):
+            # This camera's previous detection was rejected, off the path the same way: not
+            # stray detections (they scatter) but a path the other cameras' rays have pulled
+            # off this camera's (one camera alone does not fix the depth). Fitted, it
+            # corrects the path.
             return 'ok'
         if pending is not None and stamp - pending[0] <= self.max_gap_ns:
             if self._confirm_break(frame):
@@ -545,6 +559,7 @@ class TrajectoryFuser:
             self.stats['restarts'] += 1
             return 'inserted'
         self._pending = frame
+        self._pending_innovation = None if found is None else found[0]
         return 'pending'
 
     def _restart(self) -> None:
