@@ -159,6 +159,17 @@ _VERTICAL_SINE = 0.5
 _IMPACT_REACH = 5.0
 
 
+_SIZES = {}
+
+
+def _sizes(count: int) -> np.ndarray:
+    """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
+    sizes = _SIZES.get(count)
+    if sizes is None:
+        sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
+    return sizes
+
+
 class TrajectoryFuser:
     """
     Causal multi-camera trajectory fit: one observation in, at most one estimate out.
@@ -707,8 +718,8 @@ class TrajectoryFuser:
         stats = self.stats
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
-        recent = self._camera[start:end][stamps >= stamp - self.max_gap_ns]
-        if len(recent) == 0 or np.all(recent == recent[0]):
+        oldest = stamp - self.max_gap_ns
+        if sum(1 for last in self._last.values() if last >= oldest) < 2:
             stats['no_partner'] += 1
             return None
         if self._break_range is not None and \
@@ -738,9 +749,8 @@ class TrajectoryFuser:
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        sizes = np.append(_WINDOWS[_WINDOWS < count], count)
-        if self.order == 1 or count < _WINDOWS[0]:
-            sizes = sizes[-1:]
+        sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
+            np.array((count,))
         delta = (stamp - self._reference) / _SCALE_NS
         shift = np.eye(12)
         shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
@@ -791,8 +801,9 @@ class TrajectoryFuser:
             self._depth[index] = depth
             reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
             if len(reference):
-                self._measure_noise(stamp, index, row, rhs,
-                                    *self._full(*solutions[reference[0]]))
+                columns, reference_beta, reference_inverse = solutions[reference[0]]
+                self._measure_noise(stamp, index, row[:, columns], rhs, reference_beta,
+                                    reference_inverse)
         return point
 
     def _window_system(self, stamp: int, first: int, end: int):
@@ -850,12 +861,12 @@ class TrajectoryFuser:
         points = betas @ selector.T
         covariances = selector @ inverses @ selector.T
         depth = (points - self._center[index]) @ self._rotation[index, 2]
-        variance = np.trace(covariances, axis1=1, axis2=2)
+        variance = np.einsum('kii->k', covariances)
         with np.errstate(invalid='ignore', divide='ignore'):
             footprint = np.sqrt(variance) * self._focal[index] / depth
-        good = np.all(np.abs(unit - 1.0) < 1e-6, axis=1) & (depth > 0.0) & \
-            (variance > 0.0) & (footprint <= self.max_uncertainty) & \
-            np.all(np.isfinite(points), axis=1)
+        # NaN compares False: a non-finite fit fails the depth test.
+        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depth > 0.0) & (variance > 0.0) & \
+            (footprint <= self.max_uncertainty)
         if not np.any(good):
             return None
         good = np.nonzero(good)[0]
