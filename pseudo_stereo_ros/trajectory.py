@@ -160,6 +160,7 @@ _IMPACT_REACH = 5.0
 
 
 _SIZES = {}
+_UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -847,7 +848,7 @@ class TrajectoryFuser:
             count, columns = columns, np.arange(columns)
             matrices, moments = matrices[:, :count, :count], moments[:, :count]
         keep = 2 * sizes > len(columns)  # more equations than unknowns
-        if not np.any(keep):
+        if not keep.any():
             return None
         sizes, matrices, moments = sizes[keep], matrices[keep], moments[keep]
         try:
@@ -855,19 +856,19 @@ class TrajectoryFuser:
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
-        unit = np.einsum('kij,kji->ki', matrices, inverses)
-        betas = np.einsum('kij,kj->ki', inverses, moments)
+        unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
+        betas = (inverses @ moments[:, :, None])[:, :, 0]
         selector = position[:, columns]
         points = betas @ selector.T
         covariances = selector @ inverses @ selector.T
         depth = (points - self._center[index]) @ self._rotation[index, 2]
-        variance = np.einsum('kii->k', covariances)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            footprint = np.sqrt(variance) * self._focal[index] / depth
-        # NaN compares False: a non-finite fit fails the depth test.
+        variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
+        # The standard deviation in the camera's pixels per pixel of noise is
+        # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
+        limit = self.max_uncertainty / self._focal[index]
         good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depth > 0.0) & (variance > 0.0) & \
-            (footprint <= self.max_uncertainty)
-        if not np.any(good):
+            (variance <= limit * limit * depth * depth)
+        if not good.any():
             return None
         good = np.nonzero(good)[0]
         return (sizes[good], points[good], covariances[good],
@@ -903,17 +904,16 @@ class TrajectoryFuser:
         difference = points[None, :, :] - points[:, None, :]
         ridge = np.eye(3) * 1e-12 * np.trace(covariances[0])
         spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
-        statistic = np.einsum('jki,jki->jk', difference,
-                              np.linalg.solve(spread, difference[..., None])[..., 0])
-        if np.any(statistic <= 0.0):
+        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(2)
+        if (statistic <= 0.0).any():
             # Not positive where the difference of covariances is not (windows with and
             # without an impact are not nested models): the shorter window's covariance
             # C_j bounds it.
             shorter = np.einsum('jki,jil,jkl->jk', difference,
                                 np.linalg.inv(covariances + ridge), difference)
             statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = (statistic > self.consistency) & np.triu(np.ones((count, count), dtype=bool), 1)
-        failing = np.nonzero(np.any(bad, axis=0))[0]
+        bad = (statistic > self.consistency) & _UPPER[:count, :count]  # j < k only
+        failing = np.nonzero(bad.any(axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
 
     @staticmethod
