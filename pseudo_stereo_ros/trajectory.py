@@ -528,7 +528,7 @@ class TrajectoryFuser:
         if found is not None:
             innovation, jacobian = found
             sigma2 = self.sigma_px ** 2
-            spread = sigma2 * (1.0 + float(np.trace(jacobian @ covariance @ jacobian.T)) / 2.0)
+            spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
             last = self._residual.get(index)
             if last is not None and last[1] == self._segment and \
                     stamp - last[0] <= self.max_gap_ns:
@@ -889,9 +889,14 @@ class TrajectoryFuser:
     def _full(columns, beta, inverse):
         """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
         full_beta = np.zeros(12)
-        full_beta[columns] = beta
         full_inverse = np.zeros((12, 12))
-        full_inverse[np.ix_(columns, columns)] = inverse
+        count = len(columns)
+        if columns[-1] == count - 1:  # the first ``count`` coefficients
+            full_beta[:count] = beta
+            full_inverse[:count, :count] = inverse
+        else:
+            full_beta[columns] = beta
+            full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
 
     def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
@@ -919,7 +924,7 @@ class TrajectoryFuser:
     @staticmethod
     def _standardized(row, rhs, beta, inverse) -> np.ndarray:
         """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
-        leverage = min(0.95, float(np.trace(row @ inverse @ row.T)) / 2.0)
+        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
         return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
 
     def _measure_noise(self, stamp, index, row, rhs, beta, inverse) -> None:
