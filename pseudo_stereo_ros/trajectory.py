@@ -240,6 +240,9 @@ class TrajectoryFuser:
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
         self._center = np.array([camera.center for camera in cameras], dtype=float)  # (C, 3)
+        # R @ centre per camera (plain floats): a detection's right-hand sides without numpy.
+        self._rotated_center = [tuple(float(v) for v in rotation @ center)
+                                for rotation, center in zip(self._rotation, self._center)]
         self._focal = np.array([math.sqrt(abs(camera.K[0, 0] * camera.K[1, 1]))
                                 for camera in cameras])
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
@@ -355,15 +358,17 @@ class TrajectoryFuser:
             return None
         index, stamp, x, y, late = admitted
         rotation = self._rotation[index]
-        rows = np.array((rotation[0] - x * rotation[2], rotation[1] - y * rotation[2]))
+        rows = rotation[:2] - np.outer((x, y), rotation[2])
+        r0, r1, r2 = self._rotated_center[index]
         depth = self._depth[index]
         prediction = None
         if self._path is not None:
             prediction = self._predict(stamp)
-            predicted = float(rotation[2] @ (prediction[0] - self._center[index]))
+            predicted = float(rotation[2] @ prediction[0]) - r2
             if predicted > 0.0:
                 depth = predicted
-        frame = (stamp, index, rows, rows @ self._center[index], self._focal[index] / depth)
+        frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
+                 self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         else:
