@@ -160,6 +160,8 @@ _IMPACT_REACH = 5.0
 
 
 _SIZES = {}
+_EYE3 = np.eye(3)
+_EYE12 = np.eye(12)
 _UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
 
 
@@ -758,7 +760,7 @@ class TrajectoryFuser:
         sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
             np.array((count,))
         delta = (stamp - self._reference) / _SCALE_NS
-        shift = np.eye(12)
+        shift = _EYE12.copy()
         shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
         matrices = shift.T @ (self._prefix_gram[end] - self._prefix_gram[end - sizes]) @ shift
         moments = (self._prefix_moment[end] - self._prefix_moment[end - sizes]) @ shift
@@ -912,17 +914,19 @@ class TrajectoryFuser:
         # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
         # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
         difference = points[None, :, :] - points[:, None, :]
-        ridge = np.eye(3) * 1e-12 * np.trace(covariances[0])
+        first = covariances[0]
+        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
         spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
         statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(2)
-        if (statistic <= 0.0).any():
+        upper = _UPPER[:count, :count]  # j < k only
+        if (statistic[upper] <= 0.0).any():
             # Not positive where the difference of covariances is not (windows with and
             # without an impact are not nested models): the shorter window's covariance
             # C_j bounds it.
             shorter = np.einsum('jki,jil,jkl->jk', difference,
                                 np.linalg.inv(covariances + ridge), difference)
             statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = (statistic > self.consistency) & _UPPER[:count, :count]  # j < k only
+        bad = (statistic > self.consistency) & upper
         failing = np.nonzero(bad.any(axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
 
