@@ -760,10 +760,13 @@ class TrajectoryFuser:
         sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
             np.array((count,))
         delta = (stamp - self._reference) / _SCALE_NS
-        shift = _EYE12.copy()
+        unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
+        shift = _EYE12[:unknowns, :unknowns].copy()
         shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
-        matrices = shift.T @ (self._prefix_gram[end] - self._prefix_gram[end - sizes]) @ shift
-        moments = (self._prefix_moment[end] - self._prefix_moment[end - sizes]) @ shift
+        gram, moment = self._prefix_gram, self._prefix_moment
+        matrices = shift.T @ (gram[end, :unknowns, :unknowns]
+                              - gram[end - sizes, :unknowns, :unknowns]) @ shift
+        moments = (moment[end, :unknowns] - moment[end - sizes, :unknowns]) @ shift
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept = None
         if self.order == 2 and count >= _WINDOWS[0]:
