@@ -108,7 +108,7 @@ __all__ = [
 ]
 
 #: Longest window considered [s].
-DEFAULT_MAX_WINDOW_S = 0.6
+DEFAULT_MAX_WINDOW_S = 1.0
 #: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.007).
 DEFAULT_CONSISTENCY = 12.0
 #: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
