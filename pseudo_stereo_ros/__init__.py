@@ -23,8 +23,9 @@ imports neither rclpy nor any message package: :mod:`.calibration`,
 from .calibration import CalibrationError, CameraCalibration, load_calibration, save_calibration
 from .camera import Camera
 from .errors import PseudoStereoError
-from .fusion import fuse, Fuser, METHODS
+from .fusion import fuse, Fuser, make_fuser, METHODS
 from .records import Estimate, GroundTruth, Observation
+from .trajectory import TrajectoryFuser
 
 __all__ = [
     'CalibrationError',
@@ -36,7 +37,9 @@ __all__ = [
     'METHODS',
     'Observation',
     'PseudoStereoError',
+    'TrajectoryFuser',
     'fuse',
     'load_calibration',
+    'make_fuser',
     'save_calibration',
 ]

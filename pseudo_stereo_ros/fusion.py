@@ -74,8 +74,9 @@ from .errors import FuserConfigError
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
-from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS,
-                     DEFAULT_SYNC_TOLERANCE_NS, INPUT_DROP_REASONS, InputGate)
+from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
+                     INPUT_DROP_REASONS, InputGate)
+from .trajectory import TrajectoryFuser
 
 __all__ = [
     'DEFAULT_IMAGE_MARGIN',
@@ -87,9 +88,14 @@ __all__ = [
     'FuserConfigError',
     'METHODS',
     'fuse',
+    'make_fuser',
 ]
 
-METHODS = ('paper', 'naive')
+#: Every fusion method: the paper's, naive pairing, and the causal trajectory fit
+#: (:mod:`pseudo_stereo_ros.trajectory`).
+METHODS = ('paper', 'naive', 'trajectory')
+# The methods of :class:`Fuser` itself.
+_FUSER_METHODS = ('paper', 'naive')
 
 #: Why an observation gave no estimate (keys of :attr:`Fuser.stats`): the input gate's
 #: reasons, then the method's.
@@ -176,8 +182,10 @@ class Fuser:
         names = [camera.name for camera in cameras]
         if len(set(names)) != len(names):
             raise FuserConfigError(f'camera names must be unique, got {names}')
-        if method not in METHODS:
-            raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+        if method not in _FUSER_METHODS:
+            raise FuserConfigError(f'unknown method {method!r} for Fuser (known: '
+                                   f'{", ".join(_FUSER_METHODS)}; make_fuser() builds any of '
+                                   f'{", ".join(METHODS)})')
         #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
         #: reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
         #: ``gate.held`` at all times.
@@ -469,6 +477,50 @@ def _sort_key(observation) -> tuple:
     return (1, 0)
 
 
+def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
+               method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
+               max_gap_ns: Optional[int] = None, image_margin: Optional[float] = None,
+               max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
+               workspace_min_m: Optional[Sequence[float]] = None,
+               workspace_max_m: Optional[Sequence[float]] = None, **method_options):
+    """
+    Build the fuser of a method: the one factory of ``track``, holdout, Table 1 and the node.
+
+    :param cameras: the calibrated cameras
+    :param method: one of :data:`METHODS`
+    :param sync_tolerance_ns: see :class:`Fuser` [ns]
+    :param max_gap_ns: see :class:`Fuser` [ns]
+    :param image_margin: see :class:`Fuser` (the shared input rules)
+    :param max_speed_mps: see :class:`Fuser` (the shared plausibility gate) [m/s]
+    :param workspace_min_m: see :class:`Fuser` [m]
+    :param workspace_max_m: see :class:`Fuser` [m]
+    :param method_options: options of the method (``trajectory``: those of
+        :class:`~pseudo_stereo_ros.trajectory.TrajectoryFuser`)
+    :return: a :class:`Fuser` or :class:`~pseudo_stereo_ros.trajectory.TrajectoryFuser`
+        (``update``, ``process``, ``reset``, ``stats``)
+    :raises FuserConfigError: an unknown method or an invalid option
+    """
+    gate_options = {'image_margin': image_margin, 'max_speed_mps': max_speed_mps,
+                    'workspace_min_m': workspace_min_m, 'workspace_max_m': workspace_max_m}
+    if method == 'trajectory':
+        # Interim: the trajectory method keeps its own input checks until it uses the gates.
+        unbounded = all(corner is None or all(math.isinf(v) for v in corner)
+                        for corner in (workspace_min_m, workspace_max_m))
+        if (image_margin not in (None, DEFAULT_IMAGE_MARGIN) or not unbounded
+                or max_speed_mps != DEFAULT_MAX_SPEED_MPS):
+            raise FuserConfigError('image_margin, max_speed_mps and the workspace box are '
+                                   'not options of the trajectory method')
+        return TrajectoryFuser(cameras, sync_tolerance_ns=sync_tolerance_ns,
+                               max_gap_ns=max_gap_ns, **method_options)
+    if method not in METHODS:
+        raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+    if method_options:
+        raise FuserConfigError(f'method {method!r} takes no option '
+                               f'{", ".join(sorted(method_options))}')
+    return Fuser(cameras, method=method, sync_tolerance_ns=sync_tolerance_ns,
+                 max_gap_ns=max_gap_ns, **gate_options)
+
+
 def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
          observations: Iterable[Observation], **options) -> Tuple[List[Estimate], Counter]:
     """
@@ -476,9 +528,9 @@ def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
 
     :param cameras: the calibrated cameras
     :param observations: the observations, any order
-    :param options: keyword options of :class:`Fuser`
+    :param options: keyword options of :func:`make_fuser` (``method`` among them)
     :return: ``(estimates, stats)``: the estimates in stamp order and the fuser's counters
     :raises FuserConfigError: an invalid option
     """
-    fuser = Fuser(cameras, **options)
+    fuser = make_fuser(cameras, **options)
     return fuser.process(observations), fuser.stats

@@ -108,7 +108,8 @@ def test_cli_table(capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     rows = [line.split() for line in lines[2:]]
     assert [(row[0], row[1]) for row in rows] == [
-        (session, method) for session in SESSIONS for method in ('paper', 'naive', 'oracle')]
+        (session, method) for session in SESSIONS
+        for method in ('paper', 'naive', 'trajectory', 'oracle')]
 
 
 def test_cli_unknown_camera(capsys):

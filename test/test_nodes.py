@@ -128,6 +128,27 @@ def test_fuser_node_equals_core_fuse(context, namespace, burst):
                                rtol=0, atol=1e-9)
 
 
+def test_fuser_node_trajectory_equals_core_fuse(context, namespace):
+    # method trajectory: the node publishes exactly what make_fuser(...).process gives
+    # (noisy bounces: impacts, pending detections and velocity jumps included).
+    cameras, _, observations = _observations('bounce', noise_px=0.3)
+    fuser = FuserNode(context=context, namespace=namespace,
+                      parameter_overrides=[Parameter('method', value='trajectory')])
+    harness = Harness(context, namespace, fuser)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, observations, received)
+        expected, stats = fuse(cameras, observations, method='trajectory')
+        assert harness.spin_until(lambda: len(received) >= len(expected))
+        harness.spin_for(0.05)
+    finally:
+        harness.close()
+    assert stats['breaks'] >= 1
+    assert [r[0] for r in received] == [e.stamp_ns for e in expected]
+    np.testing.assert_allclose([r[1:] for r in received], [(e.x, e.y, e.z) for e in expected],
+                               rtol=0, atol=1e-9)
+
+
 def test_fuser_node_stops_on_a_stale_camera_and_resumes(context, namespace):
     cameras, _, observations = _observations('turntable')
     stamps = sorted({o.stamp_ns for o in observations if o.camera == 'camera2'})

@@ -25,6 +25,7 @@ COMMAND_MODULES = [
     'track',
     'bench',
     'holdout',
+    'sweep',
     'calibrate',
     'check',
 ]

@@ -29,10 +29,12 @@ from pathlib import Path
 
 from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
-from ..evaluation.holdout import holdout, HOLDOUT_METHODS
+from ..evaluation.holdout import holdout, HOLDOUT_METHODS, three_camera_consistency
 from ..formats.bagio import read_observations
 
 NAME = 'holdout'
+#: A held-out error above this is a gross error [px] (the issue's threshold).
+GROSS_PX = 20.0
 HELP = ('run two cameras of a bag through each method and score the estimates by reprojection '
         'into a held-out third camera (median, p90, mean px)')
 
@@ -50,6 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         choices=HOLDOUT_METHODS, help='methods to score (default: all)')
     parser.add_argument('--sync-tolerance', type=float, default=None, metavar='S',
                         help="the fuser's sync tolerance [s] (default: the fuser's)")
+    parser.add_argument('--three-cameras', action='store_true',
+                        help='also run trajectory on all three cameras and compare it with the '
+                             'two-camera run at the held-out stamps (consistency: with the '
+                             'held-out camera as an input it cannot judge)')
     parser.add_argument('--max-gap', type=float, default=None, metavar='S',
                         help="the fuser's max gap [s], also the longest interpolation span "
                              "(default: the fuser's)")
@@ -66,18 +72,35 @@ def run(args: argparse.Namespace) -> int:
                else seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': None if args.max_gap is None
                else seconds_to_ns(args.max_gap, '--max-gap')}
-    rows = []
+    rows, consistency = [], []
     for bag in args.bags:
         observations = read_observations(bag, names)
         results = holdout(cameras, observations, inputs=args.inputs,
                           held_out=args.held_out, methods=args.methods, **options)
         for method, result in results.items():
             rows.append((Path(bag).name, method, result.count, result.median_px, result.p90_px,
-                         result.mean_px))
+                         result.mean_px, int((result.errors > GROSS_PX).sum()),
+                         result.available))
+        if args.three_cameras:
+            consistency.append((Path(bag).name, three_camera_consistency(
+                cameras, observations, inputs=args.inputs, held_out=args.held_out,
+                max_gap_ns=options['max_gap_ns'])))
     width = max(len('bag'), *(len(row[0]) for row in rows))
     print(f'Held-out reprojection error in {args.held_out} [px], inputs '
-          f'{args.inputs[0]} + {args.inputs[1]}; all methods on the same events')
-    print(f'{"bag":<{width}}  {"method":<7} {"events":>6} {"median":>7} {"p90":>7} {"mean":>7}')
-    for bag, method, count, median, p90, mean in rows:
-        print(f'{bag:<{width}}  {method:<7} {count:>6d} {median:>7.2f} {p90:>7.2f} {mean:>7.2f}')
+          f'{args.inputs[0]} + {args.inputs[1]}; all methods on the same events '
+          f'(gross: over {GROSS_PX:g} px; available: events this method alone can score)')
+    print(f'{"bag":<{width}}  {"method":<10} {"events":>6} {"median":>7} {"p90":>7} '
+          f'{"mean":>7} {"gross":>6} {"available":>9}')
+    for bag, method, count, median, p90, mean, gross, available in rows:
+        print(f'{bag:<{width}}  {method:<10} {count:>6d} {median:>7.2f} {p90:>7.2f} '
+              f'{mean:>7.2f} {gross:>6d} {available:>9d}')
+    if consistency:
+        print(f'trajectory on {", ".join(names)} at the {args.held_out} stamps (not a held-out '
+              f'score: {args.held_out} is an input): median reprojection into '
+              f'{args.held_out} (self) and median distance to the two-camera estimate, in '
+              f'{args.held_out} px')
+        for bag, values in consistency:
+            print(f'{bag:<{width}}  events {values["events"]:>5d}  self '
+                  f'{values["self_px"]:5.2f} px  to two-camera {values["between_px"]:5.2f} px '
+                  f'({values["compared"]} events both cover)')
     return 0

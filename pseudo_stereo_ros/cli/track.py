@@ -43,7 +43,7 @@ from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUT
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..formats.yaml_io import read_yaml
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_MAX_SPEED_MPS,
-                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS)
+                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser, METHODS)
 from ..records import Observation
 
 NAME = 'track'
@@ -213,9 +213,9 @@ def run(args) -> int:
                'image_margin': args.image_margin, 'max_speed_mps': args.max_speed,
                'workspace_min_m': args.workspace_min, 'workspace_max_m': args.workspace_max}
     try:
-        fuser = Fuser(cameras, **options)
+        fuser = make_fuser(cameras, **options)
     except FuserConfigError as err:
-        raise UsageError(f'fuser options (--sync-tolerance, --max-gap, --image-margin, '
+        raise UsageError(f'fuser options (--method, --sync-tolerance, --max-gap, --image-margin, '
                          f'--max-speed, --workspace-min/max): {err}') from err
     notes = []
     truth = read_truth(args.truth) if args.truth else None
@@ -252,6 +252,9 @@ def run(args) -> int:
         print(note, file=sys.stderr)
     stats = fuser.stats
     dropped = ', '.join(f'{key} {stats[key]}' for key in DROP_REASONS if stats[key])
+    if stats['outlier'] or stats['breaks']:
+        dropped += (', ' if dropped else '') + (f'not fitted (outliers) {stats["outlier"]}, '
+                                                f'impacts {stats["breaks"]}')
     print(f'{len(observations)} observations from {source} -> {len(estimates)} estimates '
           f'({args.method}) written to {" and ".join(targets)}'
           + (f'; no estimate: {dropped}' if dropped else ''), file=sys.stderr)

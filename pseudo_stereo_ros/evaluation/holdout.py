@@ -38,6 +38,7 @@ Every method is scored on the same events: the held-out stamps at which all
 methods have a position.  This module is ROS-free.
 """
 
+import math
 from typing import Dict, Mapping, NamedTuple, Optional, Sequence
 
 import numpy as np
@@ -55,10 +56,11 @@ __all__ = [
     'held_out_errors',
     'holdout',
     'oracle_at',
+    'three_camera_consistency',
 ]
 
 #: Methods :func:`holdout` knows: the fuser's, plus the interpolation oracle.
-HOLDOUT_METHODS = ('paper', 'naive', 'oracle')
+HOLDOUT_METHODS = ('paper', 'naive', 'trajectory', 'oracle')
 
 
 class HoldoutResult(NamedTuple):
@@ -192,10 +194,50 @@ def held_out_errors(camera: Camera, points: np.ndarray, pixels: np.ndarray) -> n
     return np.hypot(*(projected - np.asarray(pixels, dtype=float).reshape(-1, 2)).T)
 
 
+def three_camera_consistency(cameras: Mapping[str, Camera], observations: Sequence[Observation],
+                             *, inputs: Sequence[str] = ('camera_1', 'camera_2'),
+                             held_out: str = 'camera_3', method: str = 'trajectory',
+                             max_gap_ns: Optional[int] = None) -> Dict[str, float]:
+    """
+    Run a method on all three cameras and compare it with the two-camera run (no judge).
+
+    With the third camera as an input nothing is left to judge by; instead, at the
+    third camera's own stamps: how far its estimate reprojects from that camera's
+    detection (``self_px``, the fit of its own input), and how far, in that camera's
+    pixels, it lies from the two-camera estimate interpolated to the same stamps
+    (``between_px``; the two-camera run's held-out error is the scale to compare with).
+
+    :return: ``{'events', 'self_px', 'between_px', 'compared'}``: the third camera's events
+        with an estimate, the two medians [px], and the events both runs cover
+    """
+    gap = DEFAULT_MAX_GAP_NS if max_gap_ns is None else int(max_gap_ns)
+    names = list(inputs) + [held_out]
+    everything, _ = fuse([cameras[name] for name in names],
+                         [o for o in observations if o.camera in names], method=method,
+                         max_gap_ns=max_gap_ns)
+    two, _ = fuse([cameras[name] for name in inputs],
+                  [o for o in observations if o.camera in inputs], method=method,
+                  max_gap_ns=max_gap_ns)
+    detections = {o.stamp_ns: (o.u, o.v) for o in observations if o.camera == held_out}
+    at = [e for e in everything if e.camera == held_out]
+    stamps = np.array([e.stamp_ns for e in at], dtype=np.int64)
+    points = np.array([(e.x, e.y, e.z) for e in at], dtype=float).reshape(-1, 3)
+    pixels = np.array([detections[stamp] for stamp in stamps], dtype=float).reshape(-1, 2)
+    camera = cameras[held_out]
+    own = held_out_errors(camera, points, pixels)
+    between = held_out_errors(camera, estimates_at(two, stamps, max_gap_ns=gap),
+                              camera.project(points) if len(points) else pixels)
+    between = between[np.isfinite(between)]
+    return {'events': len(at), 'self_px': float(np.median(own)) if len(own) else math.nan,
+            'between_px': float(np.median(between)) if len(between) else math.nan,
+            'compared': len(between)}
+
+
 def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], *,
             inputs: Sequence[str] = ('camera_1', 'camera_2'), held_out: str = 'camera_3',
             methods: Sequence[str] = HOLDOUT_METHODS, sync_tolerance_ns: Optional[int] = None,
-            max_gap_ns: Optional[int] = None) -> Dict[str, HoldoutResult]:
+            max_gap_ns: Optional[int] = None,
+            method_options: Optional[Mapping[str, dict]] = None) -> Dict[str, HoldoutResult]:
     """
     Score methods on two input cameras by reprojection into a held-out camera.
 
@@ -206,6 +248,7 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
     :param methods: names from :data:`HOLDOUT_METHODS`
     :param sync_tolerance_ns: the fuser's option (its default when None)
     :param max_gap_ns: the fuser's option, also the longest interpolation span here
+    :param method_options: method -> options of its fuser (see :func:`~.fusion.make_fuser`)
     :return: method -> result, all scored on the same held-out events
     """
     inputs = list(inputs)
@@ -232,7 +275,8 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
             stats = {}
         else:
             estimates, stats = fuse(pair, input_obs, method=method,
-                                    sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns)
+                                    sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                                    **(method_options or {}).get(method, {}))
             points = estimates_at(estimates, stamps, max_gap_ns=gap)
             stats = dict(stats)
         raw[method] = (held_out_errors(cameras[held_out], points, pixels), stats)

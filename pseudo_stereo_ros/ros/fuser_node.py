@@ -43,11 +43,12 @@ from visualization_msgs.msg import Marker
 from .messages import (diagnostic_array, diagnostic_status, fill_point, point_to_observation,
                        trail_marker)
 from .node_tools import declare, load_cameras, PublisherWatch, run_node, StartupError
-from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, Fuser,
+from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, make_fuser,
                       METHODS)
 from ..records import Observation
 from ..reorder import ReorderBuffer
 from ..stamps import seconds_to_ns
+from ..trajectory import DEFAULT_MAX_WINDOW_S
 
 __all__ = ['FuserNode', 'main']
 
@@ -119,18 +120,28 @@ class FuserNode(Node):
         #: True when the calibrations are the simulated rig's (calibration_files not given).
         self.default_calibration = not files
         self.cameras = load_cameras(names, files)
+        path_window_s = declare(self, 'trajectory_max_window_s', DEFAULT_MAX_WINDOW_S,
+                                'method trajectory: longest window of the path fit [s]',
+                                min_value=0.01, max_value=5.0, read_only=True)
+        order = declare(self, 'trajectory_order', 2,
+                        'method trajectory: 2 constant acceleration, 1 constant velocity',
+                        min_value=1, max_value=2, read_only=True)
+        options = {}
+        if method == 'trajectory':
+            options = {'max_window_s': path_window_s, 'order': order}
         try:
-            self.fuser = Fuser(self.cameras, method=method,
-                               sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
-                               max_gap_ns=_seconds_to_ns('max_gap_s', gap_s),
-                               image_margin=image_margin, max_speed_mps=max_speed_mps,
-                               workspace_min_m=list(workspace_min_m),
-                               workspace_max_m=list(workspace_max_m))
+            self.fuser = make_fuser(self.cameras, method=method,
+                                    sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
+                                    max_gap_ns=_seconds_to_ns('max_gap_s', gap_s),
+                                    image_margin=image_margin, max_speed_mps=max_speed_mps,
+                                    workspace_min_m=list(workspace_min_m),
+                                    workspace_max_m=list(workspace_max_m), **options)
         except ValueError as err:
             if isinstance(err, StartupError):
                 raise
-            raise StartupError(f'fuser parameters (sync_tolerance_s, max_gap_s, image_margin, '
-                               f'max_speed_mps, workspace_*_m): {err}') from err
+            raise StartupError(f'fuser parameters (method, sync_tolerance_s, max_gap_s, '
+                               f'image_margin, max_speed_mps, workspace_*_m, trajectory_*): '
+                               f'{err}') from err
         self._names = list(names)
         self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
         self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
@@ -260,6 +271,10 @@ class FuserNode(Node):
             if stats[key]:
                 values[f'dropped: {key}'] = stats[key]
         values['resets'] = stats['resets']
+        if self.fuser.method == 'trajectory':
+            values['outliers (not fitted)'] = stats['outlier']
+            values['impacts (breaks)'] = stats['breaks']
+            values['detection noise [px]'] = self.fuser.sigma_px or 0.0
         values['late (older than a fused point, after the reorder window)'] = \
             self.node_stats['late']
         values['new sessions (time jumped or paused)'] = self.node_stats['sessions']

@@ -1,0 +1,966 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+r"""
+The ``trajectory`` method: a causal fit of the ball's path to the rays of all cameras.
+
+At every shutter event of any camera the ball's path over a sliding window
+is fitted to the viewing rays of *every* camera, each at its own stamp, and
+evaluated at the event's stamp: an estimate per shutter event, immediately,
+with no look-ahead.  Any number of cameras (two or more) enter the same fit.
+
+**Model.**  Over the window the path is a polynomial per axis,
+``X(t) = sum_k beta_k ((t - t_event) / 0.1 s)^k`` with ``k <= 2`` (constant
+acceleration: gravity, drag and, locally, curves), plus, when an impact lies
+inside the window, a velocity jump ``dV * max(0, t - t_impact)`` (position
+continuous at the impact).  A detection ``(x, y)`` (undistorted, normalized)
+of a camera with rotation rows ``r1, r2, r3`` and centre ``c`` gives two
+equations linear in the coefficients, the pinhole projection multiplied out:
+``(r1 - x r3) . (X(t) - c) = 0`` and ``(r2 - y r3) . (X(t) - c) = 0``.  Each is
+weighted by ``f / depth`` (the depth predicted when the frame arrives), so
+residuals are reprojection errors in pixels.  Each frame's normal matrix is
+added once to prefix sums kept in the coefficients of a fixed reference
+stamp; a window's system is a difference of two prefixes, moved to the
+event's stamp by a linear change of the time origin: one frame's work per
+event, whatever the window.
+
+**Window.**  Fits over nested windows of the newest 6, 9, 13, 19, 28, 40
+and 60 frames (at most ``max_window_s``) are solved together.  The window is
+chosen at each event by Lepski's rule: the longest window whose estimate
+agrees with that of every shorter one within ``consistency`` (a chi-square
+bound; for nested fits the difference has the difference of their
+covariances).  Longer windows average more noise until the model's bias (a
+curve a parabola cannot follow, a missed impact) shows as disagreement, so
+the window follows the frame rate, the noise and the motion by itself: long
+on a straight line or a parabola, short on a tight circle.  Lepski's rule
+needs the detection noise; it is measured online (:attr:`sigma_px`) from the
+difference of consecutive standardized residuals of each camera in a fit of
+fixed length (Rice's estimator: the systematic part of a residual, a
+calibration bias or the curvature a parabola misses at the window's end, is
+nearly the same at consecutive frames and cancels; the noise does not),
+averaged in the log domain so that rare large samples do not inflate it, and
+never below ``min_sigma_px``.  Before a constant-acceleration fit is possible
+(a flight's first frames) a constant-velocity fit of all frames serves.
+
+**Impacts and outliers.**  A new detection is compared with the path
+predicted from the previous event: its innovation less that camera's last
+residual (slow biases cancel again), over its expected spread (noise,
+prediction covariance, and the running spread of accepted innovations).  No
+detection is gated before the noise is known (ten samples: a wrongly low
+noise makes false impacts).  Beyond ``gate`` (chi-square, 2 d.o.f.) the
+detection is *pending*: not fitted, and its event's estimate (kind
+``'predicted'``) is the predicted position, or, when the detection moved off
+it along the image of the vertical by no more than an impact could carry the
+ball since the last frame, the point of its ray nearest to the prediction
+with vertical offsets preferred (the first frame after a bounce on a table or
+floor).  If the next detection of any camera agrees with the path, the
+pending one was an outlier (``outlier``).  If it disagrees too and a path with
+a velocity jump explains both (their residuals within the gate, or ten times
+smaller than without the jump), the impact is confirmed (``breaks``): both
+are fitted with the jump, placed halfway into one of the last two intervals
+before the pending frame, and its time is refined on a grid over the next six
+frames.  Windows that reach back past the impact carry the jump; frames
+before an earlier impact are dropped.  Two disagreeing detections that no jump
+explains mean the path is lost: the fit restarts from them (``restarts``).
+
+**Conditioning.**  A fit whose estimate has a standard deviation above
+``max_uncertainty`` pixels of the newest camera per pixel of noise is not
+used (when one camera stops seeing the ball, its last rays would be
+extrapolated); with no usable fit there is no estimate (``degenerate``).
+Estimates need two cameras with a detection within ``max_gap_ns``, as for the
+paper's method.
+
+Input handling (camera, stamp, finite pixel, duplicates, sessions and
+gaps) is one call, :meth:`TrajectoryFuser._admit`, with the rules and drop
+reasons of :class:`pseudo_stereo_ros.fusion.Fuser`.
+"""
+
+from collections import Counter
+import math
+import operator
+from typing import Iterable, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from .camera import Camera
+from .errors import FuserConfigError
+from .records import Estimate, Observation
+from .timing import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
+
+__all__ = [
+    'DEFAULT_CONSISTENCY',
+    'DEFAULT_GATE',
+    'DEFAULT_MAX_UNCERTAINTY',
+    'DEFAULT_MAX_WINDOW_S',
+    'DEFAULT_MIN_SIGMA_PX',
+    'TrajectoryFuser',
+]
+
+#: Longest window considered [s].
+DEFAULT_MAX_WINDOW_S = 1.0
+#: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.007).
+DEFAULT_CONSISTENCY = 12.0
+#: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
+DEFAULT_GATE = 60.0
+#: Floor of the measured detection noise [px].
+DEFAULT_MIN_SIGMA_PX = 0.02
+#: Largest estimate standard deviation, in pixels of the newest camera per pixel of noise.
+DEFAULT_MAX_UNCERTAINTY = 8.0
+
+# Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
+_SCALE_NS = 100_000_000
+# Window sizes [frames], nested, newest first; the largest bounds the work per event.
+_WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
+# Frames kept (room for late observations).
+_CAPACITY = 256
+# Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
+# jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
+_CA = np.arange(9)
+# Entries of the change of time origin (tau -> tau - delta) in the coefficients: per axis
+# (a0, a1) = -delta, (a0, a2) = delta^2, (a1, a2) = -2 delta.
+_SHIFT_ROWS = np.array((0, 0, 1, 3, 3, 4, 6, 6, 7))
+_SHIFT_COLUMNS = np.array((1, 2, 2, 4, 5, 5, 7, 8, 8))
+_CV = np.array((0, 1, 3, 4, 6, 7))
+_POSITION = np.array((0, 3, 6))
+_JUMP = np.arange(9, 12)
+# Frames after an impact during which its time is refined, and candidate times.
+_REFINE_FRAMES = 6
+_REFINE_MIN = 2  # frames after the pending one before the time is refined
+# The prefix sums' reference stamp moves when the newest frame is this much farther from it
+# than the longest window [ns].
+_REANCHOR_NS = 400_000_000
+_BREAK_GRID = 9
+# Smoothing of the running innovation spread and of Rice's noise estimate; the clip of one
+# noise sample (in variances) once warmed up.
+_SPREAD_ALPHA = 0.05
+_SIGMA_ALPHA = 0.02
+_EULER_GAMMA = 0.5772156649015329
+# Residuals of frames with a larger leverage (short fits) do not enter the noise estimate.
+_MAX_LEVERAGE = 0.5
+# Noise samples needed before detections are gated (a wrongly low noise makes false impacts).
+_SIGMA_MATURE = 10
+# Length of the fit whose residuals measure the noise [frames].
+_NOISE_WINDOW = 10
+# Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
+_CV_MIN = 3
+# An impact estimate needs the detection off the prediction within this sine of vertical.
+_VERTICAL_SINE = 0.5
+_IMPACT_REACH = 5.0
+
+
+_SIZES = {}
+_EYE3 = np.eye(3)
+_EYE12 = np.eye(12)
+_UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
+
+
+def _sizes(count: int) -> np.ndarray:
+    """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
+    sizes = _SIZES.get(count)
+    if sizes is None:
+        sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
+    return sizes
+
+
+class TrajectoryFuser:
+    """
+    Causal multi-camera trajectory fit: one observation in, at most one estimate out.
+
+    Same interface as :class:`pseudo_stereo_ros.fusion.Fuser` (``update``, ``process``,
+    ``reset``, ``stats``, ``camera_names``, ``max_gap_ns``, ``sync_tolerance_ns``).
+
+    :param cameras: the calibrated cameras (two or more; a sequence or a mapping name -> camera)
+    :param sync_tolerance_ns: estimates of two cameras closer than this describe one instant
+        (:meth:`process` keeps the later, which saw both) [ns] (default 1 ms)
+    :param max_gap_ns: a pause of all cameras longer than this starts a new flight, and an
+        estimate needs two cameras with a detection within it [ns] (default 0.1 s)
+    :param max_window_s: longest window of the fit [s]
+    :param consistency: Lepski's chi-square bound (3 d.o.f.) between windows' estimates
+    :param gate: chi-square bound (2 d.o.f.) beyond which a detection is pending
+    :param min_sigma_px: floor of the measured detection noise [px]
+    :param max_uncertainty: largest estimate standard deviation in pixels of the newest
+        camera per pixel of detection noise
+    :param order: 2 (constant acceleration, default) or 1 (constant velocity)
+    :raises FuserConfigError: an invalid option, naming it
+    """
+
+    method = 'trajectory'
+
+    def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
+                 sync_tolerance_ns: Optional[int] = None, max_gap_ns: Optional[int] = None,
+                 max_window_s: float = DEFAULT_MAX_WINDOW_S,
+                 consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
+                 min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
+                 max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
+                 pending_estimate: str = 'impact'):
+        if isinstance(cameras, Mapping):
+            cameras = list(cameras.values())
+        cameras = list(cameras)
+        if len(cameras) < 2:
+            raise FuserConfigError(f'the fuser needs at least two cameras, got {len(cameras)}')
+        names = [camera.name for camera in cameras]
+        if len(set(names)) != len(names):
+            raise FuserConfigError(f'camera names must be unique, got {names}')
+        self.sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
+                                     else sync_tolerance_ns)
+        self.max_gap_ns = int(DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns)
+        if self.sync_tolerance_ns < 0:
+            raise FuserConfigError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
+        if self.max_gap_ns <= self.sync_tolerance_ns:
+            raise FuserConfigError(f'max_gap_ns ({self.max_gap_ns}) must exceed '
+                                   f'sync_tolerance_ns ({self.sync_tolerance_ns})')
+        for name, value in (('max_window_s', max_window_s), ('consistency', consistency),
+                            ('gate', gate), ('min_sigma_px', min_sigma_px),
+                            ('max_uncertainty', max_uncertainty)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise FuserConfigError(f'{name} must be a finite number > 0, got {value!r}')
+        if order not in (1, 2):
+            raise FuserConfigError(f'order must be 1 (constant velocity) or 2 (constant '
+                                   f'acceleration), got {order!r}')
+        if pending_estimate not in ('predicted', 'impact', 'none'):
+            raise FuserConfigError(f'unknown pending_estimate {pending_estimate!r}')
+        self.max_window_ns = int(round(max_window_s * 1e9))
+        self.consistency = float(consistency)
+        self.gate = float(gate)
+        self.min_sigma_px = float(min_sigma_px)
+        self.max_uncertainty = float(max_uncertainty)
+        self.order = int(order)
+        self.pending_estimate = pending_estimate
+        self._names = names
+        self._cameras = {camera.name: camera for camera in cameras}
+        self._index = {name: index for index, name in enumerate(names)}
+        self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
+        self._center = np.array([camera.center for camera in cameras], dtype=float)  # (C, 3)
+        # R @ centre per camera (plain floats): a detection's right-hand sides without numpy.
+        self._rotated_center = [tuple(float(v) for v in rotation @ center)
+                                for rotation, center in zip(self._rotation, self._center)]
+        self._focal = np.array([math.sqrt(abs(camera.K[0, 0] * camera.K[1, 1]))
+                                for camera in cameras])
+        baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
+        #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
+        self._depth = np.full(len(cameras), max(baseline, 1e-3))
+        # Frame store, time-ordered in [_start, _end).
+        self._stamp = np.zeros(_CAPACITY, dtype=np.int64)
+        self._camera = np.zeros(_CAPACITY, dtype=np.int64)
+        self._rows = np.zeros((_CAPACITY, 2, 3))
+        self._rhs = np.zeros((_CAPACITY, 2))
+        self._weight = np.ones(_CAPACITY)
+        # Prefix sums of each frame's normal matrix and moment in the coefficients of a fixed
+        # reference stamp (_reference): a window's system is a difference of two prefixes,
+        # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
+        self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
+        self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
+        #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
+        #: (impacts), ``outlier`` (detections not fitted), ``predicted`` (estimates at pending
+        #: detections), ``restarts`` (path lost, fitted afresh), and one key per drop reason.
+        self.stats = Counter()
+        #: The measured detection noise [px] (Rice's estimator), kept across flights.
+        self.sigma_px = None
+        self._sigma_count = 0
+        self._log_variance = None
+        self.reset()
+
+    @property
+    def camera_names(self) -> List[str]:
+        """Return the configured camera names, in order."""
+        return list(self._names)
+
+    def reset(self) -> None:
+        """Forget the flight (the measured noise and the counters are kept)."""
+        self._start = self._end = 0
+        self._reference = None  # stamp of the prefix sums' coefficients [ns]
+        self._weights_guessed = True  # weights of a new flight's frames, before its first fit
+        self._last = {}  # camera name -> its newest stamp
+        self._newest = None
+        # The path of the newest estimate: (t_ref, beta (12,), covariance (12, 12) per px^2,
+        # impact stamp or None).
+        self._path = None
+        self._pending = None  # a detection not fitted yet: (stamp, camera, rows, rhs, weight)
+        self._break = None  # stamp of the impact inside the window [ns], or None
+        self._break_range = None  # (low, high) [ns] while its time is being refined
+        self._segment = 0  # counts impacts: residuals are compared within a segment only
+        self._spread = None  # running spread of accepted innovations, per axis [px^2]
+        self._residual = {}  # camera index -> (stamp, segment, standardized residual (2,))
+        self._rejected = {}  # camera index -> stamp of its last detection taken as an outlier
+        self._previous = {}  # camera index -> stamp of its detection before the newest
+        self._noise_residual = {}  # the same from the noise estimate's fixed-length fit
+
+    # -- input ----------------------------------------------------------------------------------
+
+    def _admit(self, observation: Observation):
+        """
+        Validate an observation and apply the session rules (one call).
+
+        The rules and drop reasons are those of :class:`pseudo_stereo_ros.fusion.Fuser`.
+
+        :return: ``(camera index, stamp, x, y, late)`` with normalized coordinates, or None
+            (the drop reason is counted)
+        """
+        stats = self.stats
+        camera, stamp, u, v = observation
+        index = self._index.get(camera)
+        if index is None:
+            stats['unknown_camera'] += 1
+            return None
+        if not (math.isfinite(u) and math.isfinite(v)):
+            stats['non_finite'] += 1
+            return None
+        try:
+            stamp = operator.index(stamp)  # ints and numpy integers; floats would lose ns
+        except TypeError:
+            stats['bad_stamp'] += 1
+            return None
+        newest = self._newest
+        if newest is not None and newest - stamp > self.max_gap_ns:
+            self.reset()  # time jumped back (a replay looping): a new session
+            stats['resets'] += 1
+            newest = None
+        last = self._last.get(camera)
+        if last is not None and stamp <= last:
+            stats['duplicate' if stamp == last else 'out_of_order'] += 1
+            return None
+        if newest is not None and stamp - newest > self.max_gap_ns:
+            self.reset()  # a pause of the whole rig: the next flight starts afresh
+            stats['resets'] += 1
+            newest = None
+        x, y = self._cameras[camera].normalize_one(u, v)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            stats['undistort_failed'] += 1
+            return None
+        self._previous[index] = self._last.get(camera)
+        self._last[camera] = stamp
+        late = newest is not None and stamp < newest
+        if not late:
+            self._newest = stamp
+        return index, stamp, x, y, late
+
+    # -- the method -----------------------------------------------------------------------------
+
+    def update(self, observation: Observation) -> Optional[Estimate]:
+        """
+        Process one observation.
+
+        :param observation: camera name, stamp [ns], raw pixel
+        :return: the estimate at this shutter event, or None (the reason is counted in stats)
+        """
+        self.stats['observations'] += 1
+        admitted = self._admit(observation)
+        if admitted is None:
+            return None
+        index, stamp, x, y, late = admitted
+        rotation = self._rotation[index]
+        rows = rotation[:2] - np.outer((x, y), rotation[2])
+        r0, r1, r2 = self._rotated_center[index]
+        depth = self._depth[index]
+        prediction = None
+        if self._path is not None:
+            prediction = self._predict(stamp)
+            predicted = float(rotation[2] @ prediction[0]) - r2
+            if predicted > 0.0:
+                depth = predicted
+        frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
+                 self._focal[index] / depth)
+        if late:
+            self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
+        else:
+            verdict = self._check(frame, prediction)
+            if verdict == 'pending':
+                return self._pending_estimate(frame)
+            if verdict == 'inserted':
+                return self._estimate(stamp, index)
+        self._insert(frame)
+        return self._estimate(stamp, index)
+
+    def process(self, observations: Iterable[Observation]) -> List[Estimate]:
+        """
+        Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
+
+        Observations are sorted by stamp first (ties keep their order).  Where two
+        cameras' estimates are within ``sync_tolerance_ns`` of each other (synchronized
+        cameras), the later one, which saw both, supersedes the first.
+
+        :param observations: the observations, any order
+        :return: the estimates in stamp order
+        """
+        estimates = []
+        for observation in sorted(observations, key=lambda obs: obs.stamp_ns):
+            estimate = self.update(observation)
+            if estimate is None:
+                continue
+            if (estimates and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
+                    and estimates[-1].camera != estimate.camera):
+                estimates[-1] = estimate
+            else:
+                estimates.append(estimate)
+        return estimates
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def _arrays(self):
+        return self._stamp, self._camera, self._rows, self._rhs, self._weight
+
+    def _insert(self, frame) -> None:
+        """Insert a frame in time order and forget frames beyond the longest window."""
+        stamp, index, rows, rhs, weight = frame
+        rebuild = None
+        if self._end == _CAPACITY:
+            count = self._end - self._start
+            for array in self._arrays():
+                array[:count] = array[self._start:self._end].copy()
+            self._start, self._end = 0, count
+            rebuild = 0
+        end = self._end
+        position = end
+        if end > self._start and stamp < self._stamp[end - 1]:
+            position = self._start + int(np.searchsorted(self._stamp[self._start:end], stamp))
+            for array in self._arrays():
+                array[position + 1:end + 1] = array[position:end].copy()
+            rebuild = position if rebuild is None else rebuild
+        self._stamp[position] = stamp
+        self._camera[position] = index
+        self._rows[position] = rows
+        self._rhs[position] = rhs
+        self._weight[position] = weight
+        self._end = end + 1
+        start = max(self._start, self._end - int(_WINDOWS[-1]))
+        start += int(np.searchsorted(self._stamp[start:self._end],
+                                     self._stamp[self._end - 1] - self.max_window_ns))
+        self._start = min(start, self._end - 1)
+        if self._reference is None or \
+                self._stamp[self._end - 1] - self._reference > self.max_window_ns + _REANCHOR_NS:
+            self._reference = int(self._stamp[self._start])
+            rebuild = self._start
+        if rebuild is None:
+            rebuild = position
+        self._rebuild(max(rebuild, self._start))
+
+    def _rebuild(self, first: int) -> None:
+        """Recompute the prefix sums from frame ``first`` on (``first == _start``: from 0)."""
+        end = self._end
+        if first == end - 1 and first > self._start:  # the common case: one frame appended
+            stamp = int(self._stamp[first])
+            row = self._position_row(stamp - self._reference,
+                                     None if self._break is None else stamp - self._break)
+            weight = self._weight[first]
+            design = self._rows[first] @ row * weight
+            self._prefix_gram[end] = self._prefix_gram[first] + design.T @ design
+            self._prefix_moment[end] = self._prefix_moment[first] + \
+                (self._rhs[first] * weight) @ design
+            return
+        if first == self._start:
+            self._prefix_gram[first] = 0.0
+            self._prefix_moment[first] = 0.0
+        stamps = self._stamp[first:end]
+        jump = None if self._break is None else stamps - self._break
+        maps = self._position_map(stamps - self._reference, jump)
+        weight = self._weight[first:end, None, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
+        rhs = self._rhs[first:end] * weight[:, :, 0]
+        np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
+                  out=self._prefix_gram[first + 1:end + 1])
+        self._prefix_gram[first + 1:end + 1] += self._prefix_gram[first]
+        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0,
+                  out=self._prefix_moment[first + 1:end + 1])
+        self._prefix_moment[first + 1:end + 1] += self._prefix_moment[first]
+
+    # -- the path -------------------------------------------------------------------------------
+
+    @staticmethod
+    def _position_map(offsets_ns: np.ndarray, jump_offsets_ns) -> np.ndarray:
+        """
+        Return (N, 3, 12) maps from the coefficients to positions.
+
+        :param offsets_ns: (N,) times from the path's reference [ns]
+        :param jump_offsets_ns: (N,) times from the impact [ns], or None without one
+        """
+        tau = np.asarray(offsets_ns, dtype=float) / _SCALE_NS
+        maps = np.zeros((len(tau), 3, 12))
+        for axis in range(3):
+            maps[:, axis, 3 * axis] = 1.0
+            maps[:, axis, 3 * axis + 1] = tau
+            maps[:, axis, 3 * axis + 2] = tau * tau
+            if jump_offsets_ns is not None:
+                maps[:, axis, 9 + axis] = np.maximum(
+                    0.0, np.asarray(jump_offsets_ns, dtype=float) / _SCALE_NS)
+        return maps
+
+    @staticmethod
+    def _position_row(offset_ns: int, jump_offset_ns) -> np.ndarray:
+        """Return the (3, 12) map of :meth:`_position_map` at one time (the fast path)."""
+        tau = offset_ns / _SCALE_NS
+        row = np.zeros((3, 12))
+        row[0, 0] = row[1, 3] = row[2, 6] = 1.0
+        row[0, 1] = row[1, 4] = row[2, 7] = tau
+        row[0, 2] = row[1, 5] = row[2, 8] = tau * tau
+        if jump_offset_ns is not None and jump_offset_ns > 0:
+            row[0, 9] = row[1, 10] = row[2, 11] = jump_offset_ns / _SCALE_NS
+        return row
+
+    def _predict(self, stamp: int):
+        """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
+        t_ref, beta, covariance, t_break = self._path
+        row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        return row @ beta, row @ covariance @ row.T
+
+    def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray, point: np.ndarray):
+        """Return (innovation (2,) px, Jacobian (2, 3) px/m) of a detection, or None."""
+        depth = float(self._rotation[index, 2] @ (point - self._center[index]))
+        if not depth > 0.0:
+            return None
+        scale = self._focal[index] / depth
+        return (rows @ point - rhs) * scale, rows * scale
+
+    # -- impacts and outliers -------------------------------------------------------------------
+
+    def _check(self, frame, prediction) -> str:
+        """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
+        stamp, index, rows, rhs, _ = frame
+        if prediction is None or self._break_range is not None or \
+                self._sigma_count < _SIGMA_MATURE:
+            return 'ok'  # no path yet, an impact being placed, or the noise not known yet
+        point, covariance = prediction
+        found = self._innovation(index, rows, rhs, point)
+        statistic = math.inf
+        if found is not None:
+            innovation, jacobian = found
+            sigma2 = self.sigma_px ** 2
+            spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
+            last = self._residual.get(index)
+            if last is not None and last[1] == self._segment and \
+                    stamp - last[0] <= self.max_gap_ns:
+                # Against this camera's last residual: slowly varying biases (calibration)
+                # cancel.
+                innovation = innovation - last[2]
+                spread += sigma2
+            squared = float(innovation @ innovation) / 2.0
+            if self._spread is not None:
+                spread = max(spread, self._spread)
+            statistic = 2.0 * squared / spread
+            if statistic <= self.gate:
+                self._spread = squared if self._spread is None else self._spread + \
+                    _SPREAD_ALPHA * (squared - self._spread)
+        pending = self._pending
+        if statistic <= self.gate:
+            if pending is not None:
+                self.stats['outlier'] += 1  # the path goes on: the pending one was stray
+                self._rejected[pending[1]] = (pending[0], self._pending_innovation)
+                self._pending = None
+            return 'ok'
+        rejected = self._rejected.get(index)
+        if found is not None and rejected is not None and \
+                rejected[0] == self._previous.get(index) and rejected[1] is not None and \
+                float(np.linalg.norm(found[0] - rejected[1])) < \
+                0.5 * float(np.linalg.norm(found[0])):
+            # This camera's previous detection was rejected, off the path the same way: not
+            # stray detections (they scatter) but a path the other cameras' rays have pulled
+            # off this camera's (one camera alone does not fix the depth). Fitted, it
+            # corrects the path.
+            return 'ok'
+        if pending is not None and stamp - pending[0] <= self.max_gap_ns:
+            if self._confirm_break(frame):
+                return 'inserted'
+            # Two detections in a row off the path and not explained by an impact: the path
+            # is lost (or was wrong). Start it afresh from them, as at a new flight.
+            self._restart()
+            self._insert(pending)
+            self._insert(frame)
+            self.stats['restarts'] += 1
+            return 'inserted'
+        self._pending = frame
+        self._pending_innovation = None if found is None else found[0]
+        return 'pending'
+
+    def _restart(self) -> None:
+        """Drop the window and the path; keep the flight's timing and the measured noise."""
+        self._start = self._end
+        self._reference = None
+        self._weights_guessed = True
+        self._path = None
+        self._pending = None
+        self._break = None
+        self._break_range = None
+        self._segment += 1
+
+    def _pending_estimate(self, frame) -> Optional[Estimate]:
+        """Return the estimate at a pending detection's event: the predicted position."""
+        stamp, index = frame[0], frame[1]
+        if self.pending_estimate == 'none':
+            self.stats['pending'] += 1
+            return None
+        point, covariance = self._predict(stamp)
+        depth = float(self._rotation[index, 2] @ (point - self._center[index]))
+        if not (depth > 0.0 and math.sqrt(max(float(np.trace(covariance)), 0.0))
+                * self._focal[index] / depth <= self.max_uncertainty):
+            self.stats['degenerate'] += 1  # the path is not known well enough to predict
+            return None
+        if self.pending_estimate == 'impact':
+            # If the detection is the first after an impact on a horizontal surface (a table,
+            # the floor), the ball left the path vertically: the point of its ray nearest to
+            # the prediction, vertical offsets costing a ninth of horizontal ones; taken only
+            # if the detection moved off the prediction along the image of the vertical
+            # (within 30 degrees) and by no more than reversing the ball's velocity since the
+            # last fitted frame could carry it.  Otherwise (a stray detection) the prediction.
+            found = self._innovation(index, frame[2], frame[3], point)
+            vertical = None if found is None else found[1][:, 2]
+            if found is None or abs(found[0][0] * vertical[1] - found[0][1] * vertical[0]) > \
+                    _VERTICAL_SINE * float(np.linalg.norm(found[0]) * np.linalg.norm(vertical)):
+                vertical = None
+            direction = np.cross(frame[2][0], frame[2][1])
+            weights = np.array((9.0, 9.0, 1.0))
+            offset = point - self._center[index]
+            on_ray = self._center[index] + direction * float((offset * weights) @ direction) / \
+                float((direction * weights) @ direction)
+            last = self._predict(int(self._stamp[self._end - 1]))[0]
+            reach = _IMPACT_REACH * float(np.linalg.norm(point - last))
+            if vertical is not None and float(np.linalg.norm(on_ray - point)) <= reach:
+                point = on_ray
+        if not np.all(np.isfinite(point)):
+            self.stats['degenerate'] += 1
+            return None
+        self.stats['estimates'] += 1
+        self.stats['predicted'] += 1
+        return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
+                        float(point[2]), 'predicted')
+
+    def _confirm_break(self, frame) -> bool:
+        """Test an impact between the last consistent frames and the pending one."""
+        pending = self._pending
+        start, end = self._start, self._end
+        first = start  # frames after an earlier impact only: one jump per window
+        if self._break is not None:
+            first += int(np.searchsorted(self._stamp[start:end], self._break))
+        if end - first < 4:
+            return False
+        stamps = np.append(self._stamp[first:end], (pending[0], frame[0]))
+        cameras = np.append(self._camera[first:end], (pending[1], frame[1]))
+        rows = np.concatenate((self._rows[first:end], (pending[2], frame[2])))
+        rhs = np.concatenate((self._rhs[first:end], (pending[3], frame[3])))
+        weights = np.append(self._weight[first:end], (pending[4], frame[4]))
+        low, high = int(self._stamp[max(first, end - 3)]), int(pending[0])
+        # Two frames after the impact cannot place it: halfway before the pending frame
+        # until later frames refine it (a time chosen by the residual now would be the one
+        # that leaves the jump least determined).
+        best = None
+        for earlier, later in ((end - 1, None), (end - 2, end - 1)):
+            if earlier < first:
+                continue
+            later = high if later is None else int(self._stamp[later])
+            middle = (int(self._stamp[earlier]) + later) // 2
+            found = self._refine_break((stamps, rows, rhs, weights), int(frame[0]), middle,
+                                       middle, with_rss=True)
+            if found is not None and (best is None or found[0] < best[0]):
+                best = found
+        if best is None:
+            return False
+        _, t_break, beta = best
+        # The jump must explain both new frames: their residuals within the gate, or at
+        # least ten times smaller (squared) than without it (the impact time is only known
+        # to a grid step until later frames refine it).
+        maps = self._position_map(stamps[-2:] - int(frame[0]), stamps[-2:] - t_break)
+        spread = max(self.sigma_px ** 2, self._spread or 0.0)
+        for k in (-2, -1):
+            found = self._innovation(int(cameras[k]), rows[k], rhs[k], maps[k] @ beta)
+            before = self._innovation(int(cameras[k]), rows[k], rhs[k],
+                                      self._predict(int(stamps[k]))[0])
+            if found is None or before is None:
+                return False
+            residual = float(found[0] @ found[0])
+            if residual > max(self.gate * spread, 0.1 * float(before[0] @ before[0])):
+                return False
+        self._start = first
+        self._insert(pending)
+        self._insert(frame)
+        self._break = t_break
+        self._rebuild(self._start)
+        self._break_range = (low, high)
+        self._segment += 1
+        self._pending = None
+        self.stats['breaks'] += 1
+        return True
+
+    def _refine_break(self, frames, stamp: int, low: int, high: int, *, with_rss=False):
+        """Return (impact stamp, beta) minimizing the fit's residual over a grid, or None."""
+        stamps, rows, rhs, weights = frames
+        if low == high:
+            candidates = np.array((low,), dtype=np.int64)
+        else:
+            candidates = np.linspace(low, high, _BREAK_GRID + 2)[1:-1].astype(np.int64)
+        offsets = stamps - stamp
+        base = self._position_map(offsets, None)  # (n, 3, 12) without the jump
+        design = np.einsum('nra,nam->nrm', rows, base) * weights[:, None, None]
+        vector = (rhs * weights[:, None]).reshape(-1)
+        best = None
+        for t_break in candidates:
+            jump = np.maximum(0.0, (stamps - t_break).astype(float) / _SCALE_NS)
+            if not np.any(jump > 0.0):
+                continue
+            design[:, :, 9:] = rows * (jump * weights)[:, None, None]
+            flat = design.reshape(-1, 12)
+            try:
+                beta = np.linalg.solve(flat.T @ flat, flat.T @ vector)
+            except np.linalg.LinAlgError:
+                continue
+            residual = flat @ beta - vector
+            rss = float(residual @ residual)
+            if best is None or rss < best[0]:
+                best = (rss, int(t_break), beta)
+        if best is None:
+            return None
+        return best if with_rss else best[1:]
+
+    # -- the fit --------------------------------------------------------------------------------
+
+    def _estimate(self, stamp: int, index: int) -> Optional[Estimate]:
+        """Fit the windows at ``stamp`` and return the estimate (or None, counted)."""
+        stats = self.stats
+        start, end = self._start, self._end
+        stamps = self._stamp[start:end]
+        oldest = stamp - self.max_gap_ns
+        if sum(1 for last in self._last.values() if last >= oldest) < 2:
+            stats['no_partner'] += 1
+            return None
+        if self._break_range is not None and \
+                np.count_nonzero(stamps > self._break_range[1]) >= _REFINE_MIN:
+            low, high = self._break_range
+            best = self._refine_break((stamps, self._rows[start:end], self._rhs[start:end],
+                                       self._weight[start:end]), stamp, low, high)
+            if best is not None and best[0] != self._break:
+                self._break = best[0]
+                self._rebuild(start)
+            if np.count_nonzero(stamps > high) >= _REFINE_FRAMES:
+                self._break_range = None
+        point = self._fit(stamp, index)
+        if point is None:
+            return None
+        stats['estimates'] += 1
+        return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
+                        float(point[2]), 'trajectory')
+
+    def _fit(self, stamp: int, index: int) -> Optional[np.ndarray]:
+        """Fit the nested windows, choose one (Lepski) and return the position at ``stamp``."""
+        start, end = self._start, self._end
+        count = end - start
+        stamps = self._stamp[start:end]
+        t_break = self._break
+        if t_break is not None and not stamps[0] < t_break:
+            t_break = None  # the impact has left the window: plain fits
+        # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
+        # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
+        sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
+            np.array((count,))
+        delta = (stamp - self._reference) / _SCALE_NS
+        unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
+        shift = _EYE12[:unknowns, :unknowns].copy()
+        shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
+        gram, moment = self._prefix_gram, self._prefix_moment
+        matrices = shift.T @ (gram[end, :unknowns, :unknowns]
+                              - gram[end - sizes, :unknowns, :unknowns]) @ shift
+        moments = (moment[end, :unknowns] - moment[end - sizes, :unknowns]) @ shift
+        position = self._position_row(0, None if t_break is None else stamp - t_break)
+        kept = None
+        if self.order == 2 and count >= _WINDOWS[0]:
+            if t_break is None:
+                kept = self._fits(matrices, moments, sizes, 9, position, index)
+            else:
+                spans = stamps[::-1][sizes - 1] < t_break
+                kept = self._merge(
+                    self._fits(matrices[~spans], moments[~spans], sizes[~spans], 9, position,
+                               index),
+                    self._fits(matrices[spans], moments[spans], sizes[spans], 12, position,
+                               index))
+        after = count if t_break is None else int(np.count_nonzero(stamps > t_break))
+        if kept is None and after >= _CV_MIN:
+            # Too few frames for constant acceleration (a flight's first frames): velocity,
+            # never across an impact.
+            if after == count:
+                system = (matrices[-1:], moments[-1:])
+            else:
+                system = self._window_system(stamp, end - after, end)
+            kept = self._fits(system[0][:, _CV][:, :, _CV], system[1][:, _CV],
+                              np.array((after,)), _CV, position, index)
+        if kept is None:
+            self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
+            return None
+        sizes, points, covariances, solutions = kept
+        sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
+        chosen = self._lepski(points, covariances * sigma2)
+        beta, inverse = self._full(*solutions[chosen])
+        point = points[chosen]
+        self._path = (stamp, beta, inverse, t_break)
+        if self._weights_guessed:
+            self._refresh_weights(stamp, beta, t_break)
+        if self._stamp[end - 1] == stamp:
+            # This frame's row in the event's coefficients: its residual for the impact gate
+            # and for the noise estimate.
+            weight = self._weight[end - 1]
+            row = self._rows[end - 1] @ position * weight
+            rhs = self._rhs[end - 1] * weight
+            self._residual[index] = (stamp, self._segment,
+                                     self._standardized(row, rhs, beta, inverse))
+            depth = float(self._rotation[index, 2] @ (point - self._center[index]))
+            self._depth[index] = depth
+            reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
+            if len(reference):
+                columns, reference_beta, reference_inverse = solutions[reference[0]]
+                self._measure_noise(stamp, index, row[:, columns], rhs, reference_beta,
+                                    reference_inverse)
+        return point
+
+    def _window_system(self, stamp: int, first: int, end: int):
+        """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
+        stamps = self._stamp[first:end]
+        maps = self._position_map(stamps - stamp, None)
+        weight = self._weight[first:end, None, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
+        rhs = self._rhs[first:end] * weight[:, :, 0]
+        return (np.einsum('nri,nrj->ij', design, design)[None],
+                np.einsum('nri,nr->i', design, rhs)[None])
+
+    def _refresh_weights(self, stamp: int, beta: np.ndarray, t_break) -> None:
+        """Set the weights of a new flight's first frames from its first path."""
+        start, end = self._start, self._end
+        stamps = self._stamp[start:end]
+        positions = self._position_map(stamps - stamp, None if t_break is None
+                                       else stamps - t_break) @ beta
+        cameras = self._camera[start:end]
+        depth = np.einsum('ni,ni->n', positions - self._center[cameras],
+                          self._rotation[cameras, 2])
+        if np.all(depth > 0.0):
+            self._weight[start:end] = self._focal[cameras] / depth
+            self._rebuild(start)
+            self._weights_guessed = False
+
+    def _fits(self, matrices, moments, sizes, columns, position, index):
+        """
+        Solve window systems; keep the determined, well-conditioned ones.
+
+        :param matrices: (K, 12, 12) normal matrices at the event, ``moments`` (K, 12)
+        :param sizes: (K,) window sizes [frames]
+        :param columns: the unknowns: a count (the first 9 or 12 coefficients) or an index
+            array (already applied to ``matrices`` and ``moments``)
+        :param position: (3, 12) map from the coefficients to the position at the event
+        :param index: the event's camera
+        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, solutions)``
+            with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        """
+        if isinstance(columns, int):
+            count, columns = columns, np.arange(columns)
+            matrices, moments = matrices[:, :count, :count], moments[:, :count]
+        keep = 2 * sizes > len(columns)  # more equations than unknowns
+        if not keep.any():
+            return None
+        sizes, matrices, moments = sizes[keep], matrices[keep], moments[keep]
+        try:
+            inverses = np.linalg.inv(matrices)
+        except np.linalg.LinAlgError:
+            return None
+        # A (numerically) singular system leaves M M^-1 far from the identity.
+        unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
+        betas = (inverses @ moments[:, :, None])[:, :, 0]
+        selector = position[:, columns]
+        points = betas @ selector.T
+        covariances = selector @ inverses @ selector.T
+        depth = (points - self._center[index]) @ self._rotation[index, 2]
+        variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
+        # The standard deviation in the camera's pixels per pixel of noise is
+        # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
+        limit = self.max_uncertainty / self._focal[index]
+        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depth > 0.0) & (variance > 0.0) & \
+            (variance <= limit * limit * depth * depth)
+        if not good.any():
+            return None
+        good = np.nonzero(good)[0]
+        return (sizes[good], points[good], covariances[good],
+                [(columns, betas[k], inverses[k]) for k in good])
+
+    @staticmethod
+    def _merge(first, second):
+        """Merge two results of :meth:`_fits` in order of window size."""
+        if first is None or second is None:
+            return second if first is None else first
+        sizes = np.concatenate((first[0], second[0]))
+        order = np.argsort(sizes, kind='stable')
+        return (sizes[order], np.concatenate((first[1], second[1]))[order],
+                np.concatenate((first[2], second[2]))[order],
+                [(first[3] + second[3])[k] for k in order])
+
+    @staticmethod
+    def _full(columns, beta, inverse):
+        """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
+        full_beta = np.zeros(12)
+        full_inverse = np.zeros((12, 12))
+        count = len(columns)
+        if columns[-1] == count - 1:  # the first ``count`` coefficients
+            full_beta[:count] = beta
+            full_inverse[:count, :count] = inverse
+        else:
+            full_beta[columns] = beta
+            full_inverse[np.ix_(columns, columns)] = inverse
+        return full_beta, full_inverse
+
+    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
+        """Return the index of the longest window consistent with every shorter one."""
+        count = len(points)
+        if count == 1:
+            return 0
+        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
+        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
+        difference = points[None, :, :] - points[:, None, :]
+        first = covariances[0]
+        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
+        spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
+        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(2)
+        upper = _UPPER[:count, :count]  # j < k only
+        if (statistic[upper] <= 0.0).any():
+            # Not positive where the difference of covariances is not (windows with and
+            # without an impact are not nested models): the shorter window's covariance
+            # C_j bounds it.
+            shorter = np.einsum('jki,jil,jkl->jk', difference,
+                                np.linalg.inv(covariances + ridge), difference)
+            statistic = np.where(statistic > 0.0, statistic, shorter)
+        bad = (statistic > self.consistency) & upper
+        failing = np.nonzero(bad.any(axis=0))[0]
+        return int(failing[0] - 1) if len(failing) else count - 1
+
+    @staticmethod
+    def _standardized(row, rhs, beta, inverse) -> np.ndarray:
+        """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
+        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
+        return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
+
+    def _measure_noise(self, stamp, index, row, rhs, beta, inverse) -> None:
+        """
+        Update the detection noise from the newest frame's residual (Rice's estimator).
+
+        The residual comes from a fit of fixed length (_NOISE_WINDOW frames): its
+        systematic part (the path's curvature beyond a parabola at the window's end,
+        a camera's calibration bias) is nearly the same at consecutive frames of a
+        camera and cancels in their difference; the noise does not.
+        """
+        residual = self._standardized(row, rhs, beta, inverse)
+        last = self._noise_residual.get(index)
+        self._noise_residual[index] = (stamp, self._segment, residual)
+        if last is not None and last[1] == self._segment and stamp - last[0] <= self.max_gap_ns:
+            change = residual - last[2]
+            # Two axes, difference of two residuals: sample ~ sigma^2 * Exp(1), whose log has
+            # mean log(sigma^2) - Euler's gamma. Averaging logs keeps rare large samples (a
+            # curve the fit missed) from inflating the estimate.
+            sample = float(change @ change) / 4.0
+            if sample > 0.0:
+                self._sigma_count += 1
+                alpha = max(_SIGMA_ALPHA, 1.0 / self._sigma_count)
+                log_sample = math.log(sample) + _EULER_GAMMA
+                self._log_variance = log_sample if self._log_variance is None else \
+                    self._log_variance + alpha * (log_sample - self._log_variance)
+                self.sigma_px = max(self.min_sigma_px, math.exp(0.5 * self._log_variance))

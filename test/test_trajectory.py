@@ -1,0 +1,277 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The ``trajectory`` method: exactness, input rules, and the bars of issue 11.
+
+Bounds come from the issue (``trajectory`` at most 0.4x ``paper``'s per-coordinate MAE as a
+geometric mean over varied cases and below 0.95x in each, coverage >= 90% of the shutter
+events, no estimate over 0.5 m off; Table 1's columns at most 0.5x; the error right after an
+impact below ``paper``'s; three cameras better than any pair; on the real table-tennis data
+median and p90 within 1.1x the interpolation oracle's) or from the model itself (a polynomial
+path is fitted exactly when the motion is one).  Bars the method does not reach yet are
+``xfail(strict=True)`` with the measured figures: they fail the suite the day they pass.
+"""
+
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+from pseudo_stereo_ros.camera import Camera
+from pseudo_stereo_ros.cli.main import main
+from pseudo_stereo_ros.errors import FuserConfigError
+from pseudo_stereo_ros.evaluation.holdout import holdout, three_camera_consistency
+from pseudo_stereo_ros.evaluation.sweep import (Case, impact_errors, impact_times, make_rig,
+                                                run_case, simulate_case, small_cases,
+                                                summarize)
+from pseudo_stereo_ros.evaluation.table1 import Run, run_table1, score, simulate_run
+from pseudo_stereo_ros.formats.bagio import read_observations
+from pseudo_stereo_ros.formats.csv_io import read_estimates
+from pseudo_stereo_ros.fusion import fuse, make_fuser
+from pseudo_stereo_ros.records import Observation, positions_array
+from pseudo_stereo_ros.sim.scenarios import (default_rig, observe, Scenario, shutter_stamps,
+                                             truth_at)
+from pseudo_stereo_ros.trajectory import TrajectoryFuser
+import pytest
+
+LFG = Path(__file__).resolve().parent / 'data' / 'lfg_table_tennis'
+SESSIONS = ('n1_n1', 'n3_p1_v14', 'p2_p2')
+LFG_CAMERAS = {'camera_1': '22276213', 'camera_2': '22276209', 'camera_3': '22276216'}
+
+
+def parabola(duration=0.6):
+    """Return a thrown ball under gravity: exactly a constant-acceleration path."""
+    def position(t):
+        t = np.asarray(t, dtype=float)
+        return np.column_stack((0.5 + 2.5 * t, 1.0 - 1.0 * t, 0.6 + 4.0 * t - 4.9 * t * t))
+    return Scenario('parabola', duration, position, 'thrown ball')
+
+
+def errors_of(estimates, scenario):
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    return np.linalg.norm(positions_array(estimates) - truth_at(scenario, stamps), axis=1)
+
+
+@pytest.mark.parametrize('delta12', [1 / 60, 1 / 90, 0.004, 0.029])
+def test_exact_on_a_parabola_with_any_offset(delta12):
+    # The model is the motion: once the window holds a constant-acceleration fit (6 frames)
+    # every estimate is exact to round-off, whatever the offset; paper's linear prediction
+    # is not (a millimetre-level curvature error).
+    cameras = default_rig()
+    scenario = parabola()
+    stamps = [shutter_stamps(30.0, scenario.duration_s, phase_s=p) for p in (0.0, delta12)]
+    observations = observe(scenario, cameras, stamps, quantization_px=0.0)
+    estimates, stats = fuse(cameras, observations, method='trajectory')
+    assert stats['outlier'] == stats['breaks'] == 0
+    assert errors_of(estimates[6:], scenario).max() < 1e-6
+    paper, _ = fuse(cameras, observations)
+    assert errors_of(paper, scenario).mean() > 1e-4
+
+
+def test_same_input_rules_and_drop_reasons_as_the_paper_fuser():
+    cameras = default_rig()
+    scenario = parabola()
+    stamps = [shutter_stamps(30.0, scenario.duration_s, phase_s=p) for p in (0.0, 1 / 60)]
+    clean = observe(scenario, cameras, stamps)
+    t = clean[10].stamp_ns
+    bad = [Observation('camera9', t + 1, 1.0, 1.0), Observation('camera1', t + 2, math.nan, 1.0),
+           Observation('camera1', float(t + 3), 1.0, 1.0), clean[10], clean[8]]
+    for method in ('paper', 'trajectory'):
+        fuser = make_fuser(cameras, method=method)
+        for observation in clean[:11] + bad:
+            estimate = fuser.update(observation)
+            assert estimate is None or all(map(math.isfinite, estimate[2:5]))
+        stats = fuser.stats
+        assert (stats['unknown_camera'], stats['non_finite'], stats['bad_stamp'],
+                stats['duplicate'], stats['out_of_order']) == (1, 1, 1, 1, 1), method
+    with pytest.raises(FuserConfigError, match='order'):
+        TrajectoryFuser(cameras, order=3)
+    with pytest.raises(FuserConfigError, match='max_window_s'):
+        TrajectoryFuser(cameras, max_window_s=-1.0)
+    with pytest.raises(FuserConfigError, match='takes no option'):
+        make_fuser(cameras, method='paper', order=2)
+
+
+def test_a_new_session_after_time_jumps_back():
+    cameras = default_rig()
+    scenario = parabola()
+    stamps = [shutter_stamps(30.0, scenario.duration_s, phase_s=p) for p in (0.0, 1 / 60)]
+    observations = observe(scenario, cameras, stamps, quantization_px=0.0)
+    fuser = make_fuser(cameras, method='trajectory')
+    first = fuser.process(observations)
+    again = [fuser.update(o) for o in observations]  # a replay looping: the same stamps
+    again = [e for e in again if e is not None]
+    assert fuser.stats['resets'] == 1
+    # A fresh history (the noise measured in the first session is kept): as many estimates,
+    # exact again once the window holds a parabola.
+    assert len(again) >= len(first) - 2
+    assert errors_of(again[6:], scenario).max() < 1e-6
+
+
+@pytest.fixture(scope='module')
+def sweep():
+    return [run_case(case) for case in small_cases()]
+
+
+def test_sweep_every_case_covered_better_than_paper_and_bounded(sweep):
+    for result in sweep:
+        label = result.case.label()
+        assert result.coverage >= 0.9, label
+        assert result.max_error_m < 0.5, label
+        assert result.ratio < 1.0, (label, result.ratio)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: measured geometric mean '
+                   '0.50x paper and worst case 0.97x (0.3 px noise, 30 fps spiral) on this '
+                   'sweep; see README, "Beyond the paper: the trajectory method"')
+def test_sweep_meets_the_issue_ratio_bars(sweep):
+    summary = summarize(sweep)
+    assert summary['geometric_mean_ratio'] <= 0.4
+    assert summary['worst_ratio'] < 0.95
+
+
+def test_table1_trajectory_rows_at_most_half_of_proposed():
+    table = run_table1(default_rig())
+    for column in table['proposed']:
+        for ours, theirs in (('trajectory', 'proposed'), ('trajectory*', 'proposed*')):
+            cell, estimates, data = table[ours][column]
+            assert cell.mae_mm <= 0.5 * table[theirs][column][0].mae_mm, (ours, column)
+            assert len(estimates) >= 0.9 * len(data.truth_stamps)
+
+
+@pytest.mark.parametrize('fps, noise', [(30.0, 0.0), (30.0, 0.3), (60.0, 0.0)])
+def test_error_right_after_an_impact_below_paper(fps, noise):
+    # The first shutter events after each floor impact: the paper method extrapolates its
+    # pre-impact anchors for about three outputs; the trajectory fit detects the impact
+    # from the residuals and refits with a velocity jump.
+    cameras = default_rig()
+    data = simulate_run(Run('bounce', fps=fps, delta12_s=0.5 / fps, noise_px=noise), cameras)
+    impacts = impact_times()
+    ours, stats = fuse(cameras, data.observations, method='trajectory')
+    paper, _ = fuse(cameras, data.observations)
+    assert stats['breaks'] == len(impacts)
+    mine = impact_errors(ours, data.truth_stamps, data.truth_points, impacts, events=4,
+                         observations=data.observations)
+    theirs = impact_errors(paper, data.truth_stamps, data.truth_points, impacts, events=4,
+                           observations=data.observations)
+    assert np.isfinite(mine).all()  # an estimate at every event after the impact
+    assert np.nanmean(mine) < np.nanmean(theirs)
+    assert np.nanmean(mine[:, 1:]) < 0.5 * np.nanmean(theirs[:, 1:])
+
+
+def test_outliers_are_rejected_not_fitted():
+    cameras = default_rig()
+    data = simulate_run(Run('spiral', noise_px=0.3, seed=2, scenario_options={'turns': 3}),
+                        cameras)
+    rng = np.random.default_rng(5)
+    count = round(0.02 * len(data.observations))  # 2% stray detections
+    stray = set(rng.choice(np.arange(20, len(data.observations)), count, replace=False).tolist())
+    noisy = []
+    for k, o in enumerate(data.observations):
+        if k in stray:  # a wrong blob: 15 to 60 px away
+            angle, size = rng.uniform(0, 2 * np.pi), rng.uniform(15, 60)
+            o = o._replace(u=o.u + size * np.cos(angle), v=o.v + size * np.sin(angle))
+        noisy.append(o)
+    clean, _ = fuse(cameras, data.observations, method='trajectory')
+    ours, stats = fuse(cameras, noisy, method='trajectory')
+    paper, _ = fuse(cameras, noisy)
+    assert stats['outlier'] >= len(stray) - 1 and stats['breaks'] == 0
+    with_outliers = score(ours, data.truth_stamps, data.truth_points)
+    assert with_outliers.mae_mm < 1.25 * score(clean, data.truth_stamps,
+                                               data.truth_points).mae_mm
+    assert with_outliers.mae_mm < 0.5 * score(paper, data.truth_stamps,
+                                              data.truth_points).mae_mm
+    index = np.searchsorted(data.truth_stamps, [e.stamp_ns for e in ours])
+    assert np.linalg.norm(positions_array(ours) - data.truth_points[index], axis=1).max() < 0.1
+
+
+@pytest.mark.parametrize('scenario, noise', [('straight', 0.0), ('straight', 0.3),
+                                             ('spiral', 0.0), ('spiral', 0.3),
+                                             ('bounce', 0.0), ('bounce', 0.3)])
+def test_three_cameras_beat_every_pair(scenario, noise):
+    cameras = make_rig('three')
+    case = Case('three', 30.0, 1 / 3, noise, False, scenario, seed=3)
+    observations, truth_stamps, truth_points = simulate_case(case, cameras)
+    everything, _ = fuse(cameras, observations, method='trajectory')
+    events = len({o.stamp_ns for o in observations})
+    assert len(everything) >= 0.9 * events  # the output rate is the sum of the rates
+    three = score(everything, truth_stamps, truth_points).mae_mm
+    for pair in itertools.combinations(cameras, 2):
+        names = {camera.name for camera in pair}
+        estimates, _ = fuse(list(pair), [o for o in observations if o.camera in names],
+                            method='trajectory')
+        assert three < score(estimates, truth_stamps, truth_points).mae_mm, names
+
+
+def test_track_cli_equals_fuse(tmp_path):
+    assert main(['simulate', '--scenario', 'bounce', '--noise', '0.3', '--out',
+                 str(tmp_path)]) == 0
+    assert main(['track', '--camera', f'camera1={tmp_path / "camera1.yaml"}',
+                 '--camera', f'camera2={tmp_path / "camera2.yaml"}',
+                 '--input', str(tmp_path / 'observations.csv'),
+                 '--output', str(tmp_path / 'estimates.csv'), '--method', 'trajectory']) == 0
+    cameras = [Camera.from_file(tmp_path / f'camera{k}.yaml') for k in (1, 2)]
+    data = simulate_run(Run('bounce', noise_px=0.3), default_rig())
+    expected, _ = fuse(cameras, data.observations, method='trajectory')
+    written = read_estimates(tmp_path / 'estimates.csv')
+    assert [e.stamp_ns for e in written] == [e.stamp_ns for e in expected]
+    np.testing.assert_allclose(positions_array(written), positions_array(expected), atol=1e-9)
+
+
+@pytest.fixture(scope='module')
+def lfg():
+    cameras = {name: Camera.from_file(LFG / f'{serial}_calibration.yaml', name=name)
+               for name, serial in LFG_CAMERAS.items()}
+    return cameras, {session: read_observations(LFG / session) for session in SESSIONS}
+
+
+@pytest.fixture(scope='module')
+def lfg_results(lfg):
+    cameras, data = lfg
+    return {session: holdout(cameras, observations) for session, observations in data.items()}
+
+
+@pytest.mark.parametrize('session', SESSIONS)
+def test_real_data_within_the_oracle_floor(lfg_results, session):
+    result = lfg_results[session]
+    oracle, ours, paper = result['oracle'], result['trajectory'], result['paper']
+    assert ours.count >= 0.95 * oracle.available  # scored on (almost) all oracle events
+    assert ours.median_px <= 1.1 * oracle.median_px, (ours.median_px, oracle.median_px)
+    assert ours.p90_px <= 1.1 * oracle.p90_px, (ours.p90_px, oracle.p90_px)
+    assert ours.available >= paper.available  # at least as many camera_3 events scored
+
+
+@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: 5 gross errors (> 20 px) '
+                   "against the oracle's 2 on the common events; three of them are 10-17 ms "
+                   'into a flight, where the oracle is at 15-18 px too')
+def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
+    ours = sum(int(np.sum(r['trajectory'].errors > 20.0)) for r in lfg_results.values())
+    oracle = sum(int(np.sum(r['oracle'].errors > 20.0)) for r in lfg_results.values())
+    assert ours <= 2 * oracle
+
+
+def test_real_data_three_cameras_consistent_with_two(lfg, lfg_results):
+    # With camera_3 as an input it cannot judge itself: consistency instead.  At camera_3's
+    # own stamps the three-camera estimate reprojects into camera_3 within the detection
+    # noise (~0.7 px: it fits that detection), and lies from the two-camera estimate by no
+    # more than the two-camera run's held-out error plus that residual (triangle
+    # inequality in camera_3's image); it covers every camera_3 event the pair covers.
+    cameras, data = lfg
+    for session, observations in data.items():
+        values = three_camera_consistency(cameras, observations)
+        two = lfg_results[session]['trajectory']
+        assert values['self_px'] < 1.0, (session, values)
+        assert values['between_px'] <= two.median_px + values['self_px'], (session, values)
+        assert values['events'] >= two.available, (session, values)
