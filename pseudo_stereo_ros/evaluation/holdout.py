@@ -79,7 +79,8 @@ class HoldoutResult(NamedTuple):
     available: int
     stats: dict
 
-    @property
+    # The scored-event count shadows tuple.count (never used on a result): a kept public name.
+    @property  # type: ignore[override]
     def count(self) -> int:
         """Return the number of scored events."""
         return int(len(self.errors))
@@ -272,7 +273,7 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
     for method in methods:
         if method == 'oracle':
             points = oracle_at(pair[0], pair[1], input_obs, stamps, max_gap_ns=gap)
-            stats = {}
+            stats: dict = {}
         else:
             estimates, stats = fuse(pair, input_obs, method=method,
                                     sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,

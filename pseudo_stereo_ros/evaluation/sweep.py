@@ -29,7 +29,7 @@ impact of the bouncing ball.  ROS-free; ``pseudo_stereo sweep`` prints it.
 
 import itertools
 import math
-from typing import Dict, List, NamedTuple, Sequence
+from typing import Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
 
@@ -133,7 +133,8 @@ def simulate_case(case: Case, cameras: Sequence[Camera]):
     return observations, truth_stamps, truth_at(scenario, truth_stamps)
 
 
-def run_case(case: Case, *, cameras: Sequence[Camera] = None, **options) -> CaseResult:
+def run_case(case: Case, *, cameras: Optional[Sequence[Camera]] = None,
+             **options) -> CaseResult:
     """
     Run ``paper`` (first two cameras) and ``trajectory`` (all cameras) on one case.
 
@@ -185,7 +186,8 @@ def summarize(results: Sequence[CaseResult]) -> Dict[str, float]:
 
 def impact_times(height: float = 2.0, restitution: float = 0.8, duration: float = 2.0):
     """Return the times [s] of the ``bounce`` scenario's impacts (its default parameters)."""
-    times, t0, z0, vz0 = [], 0.0, height, 0.0
+    times: List[float] = []
+    t0, z0, vz0 = 0.0, height, 0.0
     while True:  # as the scenario: piecewise parabolas off the floor z = 0
         t_hit = (vz0 + math.sqrt(vz0 * vz0 + 2 * GRAVITY * z0)) / GRAVITY
         if t0 + t_hit > duration:

@@ -176,7 +176,7 @@ def run_table1(cameras: Sequence[Camera], *, noise_px: float = 0.0,
 
     :return: {row label: {column label: (Score, estimates, SimulatedData)}}
     """
-    results = {}
+    results: Dict[str, dict] = {}
     for row in TABLE1_ROWS:
         results[row.label] = {}
         for column, scenario in TABLE1_COLUMNS.items():
@@ -205,8 +205,8 @@ def format_table1(results: Dict) -> str:
         text = f'{label:<17}{ROW_RATES.get(label, ""):>4}'
         for index, column in enumerate(columns):
             cell = cells[column][0]
-            paper = PAPER_TABLE1.get(label)
-            paper = f'{paper[index]:>9.2f}' if paper else f'{"-":>9}'
+            figures = PAPER_TABLE1.get(label)
+            paper = f'{figures[index]:>9.2f}' if figures else f'{"-":>9}'
             text += f'{cell.mae_mm:>9.2f}{cell.distance_mm:>8.2f}{paper}'
         lines.append(text)
     lines.append('proposed*, trajectory*: delta12 = 1/90 s, delta21 = 2/90 s; all others '

@@ -196,7 +196,7 @@ def observe(scenario: Scenario, cameras: Sequence[Camera], stamps: Sequence[np.n
     :return: observations of points inside the images, sorted by stamp
     """
     rng = np.random.default_rng(seed)
-    observations = []
+    observations: List[Observation] = []
     for camera, camera_stamps in zip(cameras, stamps):
         camera_stamps = np.asarray(camera_stamps, dtype=np.int64)
         pixels = camera.project(truth_at(scenario, camera_stamps, epoch_ns=epoch_ns))
@@ -228,8 +228,8 @@ def look_at_calibration(name: str, position: Sequence[float], target: Sequence[f
     :param distortion_model: a model of :data:`calibration.DISTORTION_MODELS`
     :param dist_coeffs: its coefficients (zeros by default)
     """
-    position = np.asarray(position, dtype=float)
-    forward = np.asarray(target, dtype=float) - position
+    center = np.asarray(position, dtype=float)
+    forward = np.asarray(target, dtype=float) - center
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, (0.0, 0.0, 1.0))
     if np.linalg.norm(right) < 1e-9:
@@ -247,7 +247,7 @@ def look_at_calibration(name: str, position: Sequence[float], target: Sequence[f
         camera_name=name, image_width=int(width), image_height=int(height),
         camera_matrix=camera_matrix, distortion_model=distortion_model,
         dist_coeffs=np.asarray(dist_coeffs, dtype=float), rotation=rotation,
-        translation=-rotation @ position)
+        translation=-rotation @ center)
 
 
 def default_rig() -> List[Camera]:
