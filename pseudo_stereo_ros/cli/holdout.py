@@ -68,15 +68,15 @@ def run(args: argparse.Namespace) -> int:
     missing = [name for name in names if name not in cameras]
     if missing:
         raise UsageError(f'no --camera for {", ".join(missing)}')
-    options = {'sync_tolerance_ns': None if args.sync_tolerance is None
-               else seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
-               'max_gap_ns': None if args.max_gap is None
-               else seconds_to_ns(args.max_gap, '--max-gap')}
+    sync_tolerance_ns = None if args.sync_tolerance is None else seconds_to_ns(
+        args.sync_tolerance, '--sync-tolerance')
+    max_gap_ns = None if args.max_gap is None else seconds_to_ns(args.max_gap, '--max-gap')
     rows, consistency = [], []
     for bag in args.bags:
         observations = read_observations(bag, names)
         results = holdout(cameras, observations, inputs=args.inputs,
-                          held_out=args.held_out, methods=args.methods, **options)
+                          held_out=args.held_out, methods=args.methods,
+                          sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns)
         for method, result in results.items():
             rows.append((Path(bag).name, method, result.count, result.median_px, result.p90_px,
                          result.mean_px, int((result.errors > GROSS_PX).sum()),

@@ -80,8 +80,8 @@ class HoldoutResult(NamedTuple):
     stats: dict
 
     # The scored-event count shadows tuple.count (never used on a result): a kept public name.
-    @property  # type: ignore[override]
-    def count(self) -> int:
+    @property
+    def count(self) -> int:  # type: ignore[override]
         """Return the number of scored events."""
         return int(len(self.errors))
 
