@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if args.three_cameras:
             consistency.append((Path(bag).name, three_camera_consistency(
                 cameras, observations, inputs=args.inputs, held_out=args.held_out,
-                max_gap_ns=options['max_gap_ns'])))
+                max_gap_ns=max_gap_ns)))
     width = max(len('bag'), *(len(row[0]) for row in rows))
     print(f'Held-out reprojection error in {args.held_out} [px], inputs '
           f'{args.inputs[0]} + {args.inputs[1]}; all methods on the same events '
