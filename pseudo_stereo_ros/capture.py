@@ -52,19 +52,23 @@ stop; :class:`CaptureError` on failure) and ``release()``.
 ROS-free: the ``camera_detector`` node is the glue.
 """
 
+from __future__ import annotations
+
 from collections import Counter
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import math
 import os
 import sys
 import time
-from typing import Callable, List, Optional, Sequence, Tuple, Union
+from typing import Protocol, TypedDict
 
 import cv2
 import numpy as np
 
 from .camera import Camera
 from .errors import CaptureError
+from .records import Point3
 from .sim.rendering import BallRenderer, DEFAULT_BALL_RADIUS_M, DEFAULT_BALL_RGB
 from .sim.scenarios import make_scenario
 
@@ -89,6 +93,58 @@ _CLOCK_WINDOW_NS = 60_000_000_000
 _MAX_CATCH_UP = 3
 
 
+class _Capture(Protocol):
+    """What this module uses of ``cv2.VideoCapture`` (tests inject fakes)."""
+
+    def isOpened(self) -> bool: ...
+
+    def read(self) -> tuple[bool, np.ndarray | None]: ...
+
+    def get(self, prop: int, /) -> float: ...
+
+    def set(self, prop: int, value: float, /) -> bool: ...  # noqa: A003 (OpenCV's name)
+
+    def release(self) -> None: ...
+
+
+#: ``factory(device) -> VideoCapture`` of a :class:`DeviceSource`.
+DeviceFactory = Callable[[str | int], _Capture | None]
+#: ``factory(path) -> VideoCapture`` of a :class:`FileSource`.
+FileFactory = Callable[[str], _Capture | None]
+
+
+class _Source(Protocol):
+    """A frame source, as the module docstring describes it."""
+
+    description: str
+    live: bool
+
+    @property
+    def is_open(self) -> bool: ...
+
+    def start(self) -> list[str]: ...
+
+    def read(self, wait: Wait) -> Frame | None: ...
+
+    def release(self) -> None: ...
+
+
+class _Stop(Protocol):
+    """A :class:`threading.Event` as :meth:`CaptureLoop.run` uses it."""
+
+    def is_set(self) -> bool: ...
+
+    def wait(self, timeout: float | None = None) -> bool: ...
+
+
+class _Requested(TypedDict):
+    fourcc: str
+    width_px: int
+    height_px: int
+    fps: float
+    exposure_s: float
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """
@@ -109,7 +165,7 @@ class Frame:
     available_ns: int
     index: int
     stamp_source: str
-    truth: Optional[Tuple[float, float, float]] = None
+    truth: Point3 | None = None
 
 
 def _encoding(image: np.ndarray) -> str:
@@ -118,7 +174,7 @@ def _encoding(image: np.ndarray) -> str:
     return 'bgra8' if image.shape[2] == 4 else 'bgr8'
 
 
-def parse_device(device: Union[str, int]) -> Union[str, int]:
+def parse_device(device: str | int) -> str | int:
     """
     Return a device as OpenCV opens it: an index (``'0'`` -> 0) or a path (``/dev/video0``).
 
@@ -151,20 +207,21 @@ class ClockMapping:
         self.refresh_ns = int(refresh_s * 1e9)
         self._monotonic_ns = monotonic_ns
         self._system_ns = system_ns
-        self._offset_ns = None
-        self._measured_at = None
+        self._offset_ns: int | None = None
+        self._measured_at: int | None = None
         #: Half-width of the tightest bracket of the last measurement [ns].
-        self.uncertainty_ns = None
+        self.uncertainty_ns: int | None = None
 
     def measure(self, tries: int = 5) -> int:
         """Measure the offset now; return it [ns] (system = monotonic + offset)."""
-        best = None
+        best: tuple[int, int] | None = None  # (bracket width, offset) [ns]
         for _ in range(tries):
             before = self._monotonic_ns()
             system = self._system_ns()
             after = self._monotonic_ns()
             if best is None or after - before < best[0]:
                 best = (after - before, system - (before + after) // 2)
+        assert best is not None, 'tries must be at least 1'
         self._offset_ns = best[1]
         self.uncertainty_ns = (best[0] + 1) // 2
         self._measured_at = self._monotonic_ns()
@@ -172,9 +229,9 @@ class ClockMapping:
 
     def offset_ns(self) -> int:
         """Return the current offset [ns], re-measured when older than ``refresh_s``."""
-        if self._offset_ns is None or \
+        if self._offset_ns is None or self._measured_at is None or \
                 self._monotonic_ns() - self._measured_at >= self.refresh_ns:
-            self.measure()
+            return self.measure()
         return self._offset_ns
 
     def to_system_ns(self, monotonic_ns: int) -> int:
@@ -184,7 +241,7 @@ class ClockMapping:
 
 # -- sources --------------------------------------------------------------------------------------
 
-def _default_device_capture(device):
+def _default_device_capture(device: str | int) -> cv2.VideoCapture:
     if sys.platform.startswith('linux'):
         return cv2.VideoCapture(device, cv2.CAP_V4L2)
     return cv2.VideoCapture(device)
@@ -214,10 +271,10 @@ class DeviceSource:
 
     live = True
 
-    def __init__(self, device: Union[str, int], *, width_px: int = 0, height_px: int = 0,
+    def __init__(self, device: str | int, *, width_px: int = 0, height_px: int = 0,
                  fps: float = 0.0, fourcc: str = '', exposure_s: float = 0.0,
-                 stamp_offset_s: float = 0.0, capture_factory: Optional[Callable] = None,
-                 clock: Optional[ClockMapping] = None,
+                 stamp_offset_s: float = 0.0, capture_factory: DeviceFactory | None = None,
+                 clock: ClockMapping | None = None,
                  system_ns: Callable[[], int] = time.time_ns):
         self.device = parse_device(device)
         self.description = str(device)
@@ -227,24 +284,24 @@ class DeviceSource:
                             ('exposure_s', exposure_s)):
             if not (math.isfinite(value) and value >= 0):
                 raise CaptureError(f'{name}: expected a number >= 0, got {value!r}')
-        self.requested = {'fourcc': fourcc.upper(), 'width_px': int(width_px),
-                          'height_px': int(height_px), 'fps': float(fps),
-                          'exposure_s': float(exposure_s)}
+        self.requested: _Requested = {'fourcc': fourcc.upper(), 'width_px': int(width_px),
+                                      'height_px': int(height_px), 'fps': float(fps),
+                                      'exposure_s': float(exposure_s)}
         self.stamp_offset_ns = int(round(stamp_offset_s * 1e9))
-        self._factory = capture_factory or _default_device_capture
+        self._factory: DeviceFactory = capture_factory or _default_device_capture
         self.clock = clock or ClockMapping(refresh_s=0.0)
         self._system_ns = system_ns
-        self._capture = None
+        self._capture: _Capture | None = None
         self._index = 0
         #: What the camera delivers after :meth:`start` (read back from the driver).
-        self.settings = {}
+        self.settings: dict[str, int | float | str] = {}
 
     @property
     def is_open(self) -> bool:
         """Return True while the device is open."""
         return self._capture is not None
 
-    def start(self) -> List[str]:
+    def start(self) -> list[str]:
         """
         Open the device and apply the requested settings, reading each back.
 
@@ -265,21 +322,21 @@ class DeviceSource:
         warnings = []
         wanted = self.requested
         if wanted['fourcc']:
-            capture.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*wanted['fourcc']))
-            got = _fourcc_text(capture.get(cv2.CAP_PROP_FOURCC))
-            if got.upper() != wanted['fourcc']:
+            capture.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*wanted['fourcc']))
+            got_fourcc = _fourcc_text(capture.get(cv2.CAP_PROP_FOURCC))
+            if got_fourcc.upper() != wanted['fourcc']:
                 warnings.append(f'{self.description}: asked for fourcc {wanted["fourcc"]}, the '
-                                f'camera gives {got or "unknown"}')
-        for name, prop in (('width_px', cv2.CAP_PROP_FRAME_WIDTH),
-                           ('height_px', cv2.CAP_PROP_FRAME_HEIGHT)):
-            if wanted[name]:
-                capture.set(prop, wanted[name])
-        for name, prop in (('width_px', cv2.CAP_PROP_FRAME_WIDTH),
-                           ('height_px', cv2.CAP_PROP_FRAME_HEIGHT)):
-            got = int(capture.get(prop))
-            if wanted[name] and got != wanted[name]:
-                warnings.append(f'{self.description}: asked for {name} {wanted[name]}, the '
-                                f'camera gives {got}')
+                                f'camera gives {got_fourcc or "unknown"}')
+        sizes = (('width_px', wanted['width_px'], cv2.CAP_PROP_FRAME_WIDTH),
+                 ('height_px', wanted['height_px'], cv2.CAP_PROP_FRAME_HEIGHT))
+        for _, size, prop in sizes:
+            if size:
+                capture.set(prop, size)
+        for name, size, prop in sizes:
+            got_size = int(capture.get(prop))
+            if size and got_size != size:
+                warnings.append(f'{self.description}: asked for {name} {size}, the '
+                                f'camera gives {got_size}')
         if wanted['fps']:
             capture.set(cv2.CAP_PROP_FPS, wanted['fps'])
             got = capture.get(cv2.CAP_PROP_FPS)
@@ -305,7 +362,7 @@ class DeviceSource:
         self.clock.measure()
         return warnings
 
-    def stamp(self, pos_msec: float, returned_ns: int) -> Tuple[int, str]:
+    def stamp(self, pos_msec: float, returned_ns: int) -> tuple[int, str]:
         """
         Return the capture stamp [ns] of a frame and where it came from.
 
@@ -368,7 +425,7 @@ class FileSource:
     live = False
 
     def __init__(self, path: str, *, epoch_ns: int = 0, realtime: bool = True,
-                 loop: bool = False, capture_factory: Optional[Callable] = None,
+                 loop: bool = False, capture_factory: FileFactory | None = None,
                  system_ns: Callable[[], int] = time.time_ns):
         if not str(path):
             raise CaptureError('video file: empty path')
@@ -377,23 +434,23 @@ class FileSource:
         self.epoch_ns = int(epoch_ns)
         self.realtime = bool(realtime)
         self.loop = bool(loop)
-        self._factory = capture_factory or cv2.VideoCapture
+        self._factory: FileFactory = capture_factory or cv2.VideoCapture
         self._system_ns = system_ns
-        self._capture = None
+        self._capture: _Capture | None = None
         self._index = 0            # frames delivered, all passes
         self._pass_frames = 0      # frames read in this pass
         self._pass_offset_ns = 0.0  # added to the file times of this pass
-        self._last_time_ns = None  # file time of the previous frame of this pass
-        self._start = None         # (system ns, stamp ns) of the first frame, for pacing
-        self.period_ns = None
-        self.settings = {}
+        self._last_time_ns: float | None = None  # file time of the previous frame of this pass
+        self._start: tuple[int, int] | None = None  # (system ns, stamp ns) of the first frame
+        self.period_ns: float | None = None
+        self.settings: dict[str, int | float] = {}
 
     @property
     def is_open(self) -> bool:
         """Return True while the file is open."""
         return self._capture is not None
 
-    def start(self) -> List[str]:
+    def start(self) -> list[str]:
         """
         Open the file.
 
@@ -416,6 +473,7 @@ class FileSource:
 
     def _file_time_ns(self) -> float:
         """Return the file time [ns] of the frame just read: its presentation time."""
+        assert self._capture is not None, 'called by read() on an open file'
         pos_msec = self._capture.get(cv2.CAP_PROP_POS_MSEC)
         if math.isfinite(pos_msec) and pos_msec >= 0:
             time_ns = pos_msec * 1e6
@@ -433,13 +491,14 @@ class FileSource:
         self._pass_offset_ns += self._last_time_ns + (self.period_ns or 0.0)
         self._pass_frames = 0
         self._last_time_ns = None
+        assert self._capture is not None, 'called by read() on an open file'
         if not self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0):
             self._capture.release()
             self._capture = None
             self.start()
         return True
 
-    def read(self, wait: Wait) -> Optional[Frame]:
+    def read(self, wait: Wait) -> Frame | None:
         """
         Read the next frame; with ``realtime`` wait until its time comes.
 
@@ -533,13 +592,13 @@ class VirtualSource:
         self._system_ns = system_ns
         self.epoch_ns = int(epoch_ns) if epoch_ns else system_ns() + 200_000_000
         self._next_index = 0
-        self._prepared = None  # (index, image, truth)
+        self._prepared: tuple[int, np.ndarray | None, Point3 | None] | None = None
         #: Counts: ``skipped`` frames (late by more than a few periods).
-        self.stats = Counter()
+        self.stats: Counter[str] = Counter()
 
     is_open = True
 
-    def start(self) -> List[str]:
+    def start(self) -> list[str]:
         """Nothing to open; return no warnings."""
         return []
 
@@ -550,7 +609,7 @@ class VirtualSource:
         """Return the shutter stamp [ns] of frame ``index``."""
         return self.epoch_ns + self.phase_ns + int(round(index * self.period_ns))
 
-    def render(self, index: int) -> Tuple[Optional[np.ndarray], Optional[Tuple[float, ...]]]:
+    def render(self, index: int) -> tuple[np.ndarray | None, Point3 | None]:
         """
         Render frame ``index``.
 
@@ -566,9 +625,10 @@ class VirtualSource:
                 return None, None
             return self.renderer.render(None), None
         position = self.scenario.position(np.array([seconds]))[0]
-        return self.renderer.render(position), tuple(float(x) for x in position)
+        x, y, z = (float(c) for c in position)
+        return self.renderer.render(position), (x, y, z)
 
-    def read(self, wait: Wait) -> Optional[Frame]:
+    def read(self, wait: Wait) -> Frame | None:
         """
         Render the next frame ahead of its shutter and return it at its shutter time.
 
@@ -614,8 +674,8 @@ class CaptureLoop:
     :param clock: monotonic clock [s] for the reports (injectable for tests)
     """
 
-    def __init__(self, source, on_frame: Callable[[Frame], None], *,
-                 report: Optional[Callable[[str, str], None]] = None,
+    def __init__(self, source: _Source, on_frame: Callable[[Frame], None], *,
+                 report: Callable[[str, str], None] | None = None,
                  report_period_s: float = 1.0, retry_initial_s: float = 0.1,
                  retry_max_s: float = 2.0, max_frame_age_s: float = 0.5,
                  clock: Callable[[], float] = time.monotonic):
@@ -632,12 +692,12 @@ class CaptureLoop:
         self.clock = clock
         #: Counts: ``frames`` read, ``delivered``, ``stale``, ``not_newer``, ``failures``,
         #: ``reports``, ``recoveries``.
-        self.stats = Counter()
-        self._failing_since = None
+        self.stats: Counter[str] = Counter()
+        self._failing_since: float | None = None
         self._outage_failures = 0
-        self._last_report = None
-        self._last_error = None
-        self._last_stamp_ns = None
+        self._last_report: float | None = None
+        self._last_error: CaptureError | None = None
+        self._last_stamp_ns: int | None = None
 
     @property
     def failing(self) -> bool:
@@ -660,17 +720,19 @@ class CaptureLoop:
             self._report_failure(now, self.retry_delay_s())
 
     def _report_failure(self, now: float, retry_in_s: float) -> None:
+        assert self._failing_since is not None, 'called while failing'
         self._last_report = now
         self.stats['reports'] += 1
         self.report('error', f'{self._last_error} (failing for '
                              f'{now - self._failing_since:.1f} s, {self._outage_failures} '
                              f'attempts; retrying in {retry_in_s:.2g} s)')
 
-    def _wait_to_retry(self, stop) -> None:
+    def _wait_to_retry(self, stop: _Stop) -> None:
         """Wait out the back-off; report the continuing failure once per report period."""
         retry_at = self.clock() + self.retry_delay_s()
         while True:
             now = self.clock()
+            assert self._last_report is not None, '_failed() reported the failure'
             next_report = self._last_report + self.report_period_s
             if stop.wait(max(min(retry_at, next_report) - now, 0.0)):
                 return
@@ -691,7 +753,7 @@ class CaptureLoop:
         self._outage_failures = 0
         self._last_report = None
 
-    def run(self, stop) -> str:
+    def run(self, stop: _Stop) -> str:
         """
         Run until ``stop`` is set or the source ends.
 

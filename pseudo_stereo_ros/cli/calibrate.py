@@ -25,11 +25,12 @@ and the residual of each point, flags outliers and draws a PNG of the points
 and their reprojections.
 """
 
+from __future__ import annotations
+
 import math
 import os
 from pathlib import Path
 import re
-from typing import Optional, Tuple
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from . import UsageError
 from ..calibrate import (auto_dist_terms, calibrate_extrinsics, calibrate_full,
                          calibrate_intrinsics, CalibrationResult, DISTORTION_TERMS,
                          list_images, video_boards)
-from ..calibration import load_camera_info, save_calibration
+from ..calibration import load_camera_info, PathLike, save_calibration
 from ..formats.csv_io import CsvError, parse_float, read_rows
 
 __all__ = ['NAME', 'HELP', 'add_arguments', 'read_correspondences', 'run', 'plot_result']
@@ -119,7 +120,7 @@ def _add_output_arguments(parser) -> None:
                         help='residual plot PNG (default: next to --out, <stem>_residuals.png)')
 
 
-def parse_size(text: str, option: str) -> Tuple[int, int]:
+def parse_size(text: str, option: str) -> tuple[int, int]:
     """Parse ``AxB`` (two positive integers) or raise :class:`UsageError` naming the option."""
     match = _SIZE.match(text or '')
     if not match or int(match.group(1)) <= 0 or int(match.group(2)) <= 0:
@@ -127,7 +128,7 @@ def parse_size(text: str, option: str) -> Tuple[int, int]:
     return int(match.group(1)), int(match.group(2))
 
 
-def read_correspondences(path) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_correspondences(path: PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Read a correspondence CSV with the header ``x,y,z,u,v`` (extra columns are ignored).
 
@@ -150,8 +151,8 @@ def read_correspondences(path) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     return data[:, :3], data[:, 3:], np.array(lines)
 
 
-def _check_output(path: str, option: str) -> Path:
-    path = Path(path)
+def _check_output(text: str, option: str) -> Path:
+    path = Path(text)
     if not path.parent.is_dir():
         raise UsageError(f'{option} {path}: directory {path.parent} does not exist')
     return path
@@ -204,9 +205,11 @@ def run(args) -> int:
     return 0
 
 
-def _residual_table(result: CalibrationResult, lines: Optional[np.ndarray]) -> str:
+def _residual_table(result: CalibrationResult, lines: np.ndarray | None) -> str:
     flag = {True: '  OUTLIER', False: ''}
     if result.mode == 'intrinsics':
+        # calibrate_intrinsics sets both; the other modes set world instead.
+        assert result.image_rms_px is not None and result.point_image is not None
         rows = ['image  rms_px  max_px  outliers  file']
         for index, label in enumerate(result.image_labels):
             mine = result.point_image == index
@@ -215,6 +218,7 @@ def _residual_table(result: CalibrationResult, lines: Optional[np.ndarray]) -> s
                         f'{int(result.outliers[mine].sum()):8d}  {os.path.basename(label)}')
         return '\n'.join(rows)
     rows = ['line        x        y        z         u         v  residual_px']
+    assert result.world is not None
     for i, (point, pixel, residual) in enumerate(zip(result.world, result.pixels,
                                                      result.residuals_px)):
         line = int(lines[i]) if lines is not None else i
@@ -224,7 +228,8 @@ def _residual_table(result: CalibrationResult, lines: Optional[np.ndarray]) -> s
     return '\n'.join(rows)
 
 
-def plot_result(result: CalibrationResult, path, *, lines: Optional[np.ndarray] = None) -> None:
+def plot_result(result: CalibrationResult, path: PathLike, *,
+                lines: np.ndarray | None = None) -> None:
     """
     Draw the measured points, their reprojections and the residuals to a PNG.
 
@@ -268,6 +273,7 @@ def plot_result(result: CalibrationResult, path, *, lines: Optional[np.ndarray] 
     image_ax.legend(loc='upper right', fontsize=8)
 
     if result.mode == 'intrinsics':
+        assert result.image_rms_px is not None
         residual_ax.bar(np.arange(len(result.image_rms_px)), result.image_rms_px,
                         color='tab:blue')
         residual_ax.set_xlabel('image')

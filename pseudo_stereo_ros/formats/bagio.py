@@ -32,12 +32,15 @@ messages) raises :class:`BagError` with a message naming the bag and the
 reason.  This module imports rosbags only, never rclpy.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
 import os
 from pathlib import Path
 import re
 import sqlite3
 import struct
-from typing import Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import cast, Protocol, TYPE_CHECKING
 
 import numpy as np
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
@@ -48,10 +51,15 @@ from ..errors import BagError
 
 try:
     from rosbags.rosbag2 import CompressionFormat, CompressionMode
-except ImportError:  # rosbags < 0.11 nests them in Writer
-    CompressionFormat, CompressionMode = Writer.CompressionFormat, Writer.CompressionMode
+except ImportError:  # rosbags < 0.11 nests them in Writer (the installed stubs are newer)
+    CompressionFormat, CompressionMode = (  # type: ignore[misc]
+        Writer.CompressionFormat, Writer.CompressionMode)  # type: ignore[attr-defined]
 from ..records import Estimate, Observation
 from ..stamps import BAG_STAMP_MAX_NS, stamp_fields, stamp_ns
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Msg, Typestore
 
 __all__ = [
     'BagError',
@@ -77,7 +85,7 @@ __all__ = [
     'write_points',
 ]
 
-PathLike = Union[str, os.PathLike]
+PathLike = str | os.PathLike[str]
 
 #: Message type of image points and positions.
 IMAGE_POINT_TYPE = 'geometry_msgs/msg/PointStamped'
@@ -96,10 +104,45 @@ _STORAGE = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 _READ_ERRORS = (ReaderError, OSError, EOFError, struct.error, sqlite3.DatabaseError, OverflowError,
                 KeyError, IndexError, TypeError, ValueError, UnicodeDecodeError)
 
-_typestore = None
+_typestore: Typestore | None = None
 
 
-def typestore():
+class _Time(Protocol):
+    sec: int
+    nanosec: int
+
+
+class _Header(Protocol):
+    stamp: _Time
+
+
+class _Point(Protocol):
+    x: float
+    y: float
+    z: float
+
+
+class _Stamped(Protocol):
+    header: _Header
+
+
+class _PointStamped(_Stamped, Protocol):
+    """A deserialized ``geometry_msgs/msg/PointStamped`` (rosbags returns ``object``)."""
+
+    point: _Point
+
+
+class _Image(_Stamped, Protocol):
+    """A deserialized ``sensor_msgs/msg/Image``."""
+
+    height: int
+    width: int
+    step: int
+    encoding: str
+    data: np.ndarray
+
+
+def typestore() -> Typestore:
     """Return the shared ROS 2 Jazzy typestore of rosbags."""
     global _typestore
     if _typestore is None:
@@ -134,12 +177,12 @@ def _reason(err: BaseException) -> str:
     return text.splitlines()[0]
 
 
-def _topics(reader: Reader) -> Dict[str, str]:
+def _topics(reader: Reader) -> dict[str, str]:
     """Return topic -> message type (each topic once)."""
     return {connection.topic: connection.msgtype for connection in reader.connections}
 
 
-def bag_topics(path: PathLike) -> Dict[str, str]:
+def bag_topics(path: PathLike) -> dict[str, str]:
     """
     Return the topics of a bag and their message types.
 
@@ -153,7 +196,7 @@ def bag_topics(path: PathLike) -> Dict[str, str]:
         reader.close()
 
 
-def bag_cameras(path: PathLike) -> List[str]:
+def bag_cameras(path: PathLike) -> list[str]:
     """
     Return the camera names that have an image point topic in a bag.
 
@@ -168,7 +211,8 @@ def bag_cameras(path: PathLike) -> List[str]:
     return sorted(m.group(1) for m in map(_IMAGE_POINT_RE.match, topics) if m)
 
 
-def _connections(reader: Reader, path: PathLike, topics: Optional[Sequence[str]]) -> list:
+def _connections(reader: Reader, path: PathLike, topics: Sequence[str] | None
+                 ) -> list[Connection]:
     """Return the reader's connections of the topics (all when None); each must exist."""
     if topics is None:
         return list(reader.connections)
@@ -180,8 +224,8 @@ def _connections(reader: Reader, path: PathLike, topics: Optional[Sequence[str]]
     return [c for c in reader.connections if c.topic in set(topics)]
 
 
-def bag_message_counts(path: PathLike, topics: Optional[Sequence[str]] = None
-                       ) -> Dict[str, Tuple[str, int]]:
+def bag_message_counts(path: PathLike, topics: Sequence[str] | None = None
+                       ) -> dict[str, tuple[str, int]]:
     """
     Return the topics of a bag with their type and message count, from the bag's index.
 
@@ -194,7 +238,7 @@ def bag_message_counts(path: PathLike, topics: Optional[Sequence[str]] = None
     """
     reader = _open(path)
     try:
-        counts: Dict[str, Tuple[str, int]] = {}
+        counts: dict[str, tuple[str, int]] = {}
         for connection in _connections(reader, path, topics):
             _, count = counts.get(connection.topic, (connection.msgtype, 0))
             counts[connection.topic] = (connection.msgtype, count + int(connection.msgcount))
@@ -203,8 +247,8 @@ def bag_message_counts(path: PathLike, topics: Optional[Sequence[str]] = None
         reader.close()
 
 
-def iter_raw(path: PathLike, topics: Optional[Sequence[str]] = None
-             ) -> Iterator[Tuple[str, str, int, bytes]]:
+def iter_raw(path: PathLike, topics: Sequence[str] | None = None
+             ) -> Iterator[tuple[str, str, int, bytes]]:
     """
     Iterate over the raw messages of a bag in log-time order.
 
@@ -230,10 +274,10 @@ def iter_raw(path: PathLike, topics: Optional[Sequence[str]] = None
 
 
 def _read_messages(path: PathLike, topics: Sequence[str], expected: str = IMAGE_POINT_TYPE
-                   ) -> Iterator[Tuple[str, object]]:
+                   ) -> Iterator[tuple[str, object]]:
     """Yield ``(topic, message)`` of the given topics, checking their type."""
     store = typestore()
-    checked = set()
+    checked: set[str] = set()
     for topic, msgtype, _, data in iter_raw(path, topics):
         if topic not in checked:
             if msgtype != expected:
@@ -264,12 +308,18 @@ def _check_types(path: PathLike, topics: Sequence[str], expected: str = IMAGE_PO
                            f'expected {expected}')
 
 
-def _stamp_ns(msg) -> int:
+def _read_points(path: PathLike, topics: Sequence[str]) -> Iterator[tuple[str, _PointStamped]]:
+    """Yield ``(topic, message)`` of PointStamped topics, checking their type."""
+    for topic, msg in _read_messages(path, topics, IMAGE_POINT_TYPE):
+        yield topic, cast(_PointStamped, msg)
+
+
+def _stamp_ns(msg: _Stamped) -> int:
     return stamp_ns(msg.header.stamp)
 
 
-def read_observations(path: PathLike, cameras: Optional[Sequence[str]] = None
-                      ) -> List[Observation]:
+def read_observations(path: PathLike, cameras: Sequence[str] | None = None
+                      ) -> list[Observation]:
     """
     Read the image points of a bag as observations.
 
@@ -287,14 +337,14 @@ def read_observations(path: PathLike, cameras: Optional[Sequence[str]] = None
     _check_types(path, list(by_topic))
     observations = [Observation(by_topic[topic], _stamp_ns(msg), float(msg.point.x),
                                 float(msg.point.y))
-                    for topic, msg in _read_messages(path, list(by_topic))]
+                    for topic, msg in _read_points(path, list(by_topic))]
     if not observations:
         raise BagError(f'{path}: no messages on {", ".join(by_topic)}')
     return observations
 
 
-def read_positions(path: PathLike, topic: str = POSITION_TOPIC) -> List[Tuple[int, float,
-                                                                              float, float]]:
+def read_positions(path: PathLike, topic: str = POSITION_TOPIC
+                   ) -> list[tuple[int, float, float, float]]:
     """
     Read a PointStamped topic as positions.
 
@@ -304,11 +354,11 @@ def read_positions(path: PathLike, topic: str = POSITION_TOPIC) -> List[Tuple[in
     """
     _check_types(path, [topic])
     return [(_stamp_ns(msg), float(msg.point.x), float(msg.point.y), float(msg.point.z))
-            for _, msg in _read_messages(path, [topic])]
+            for _, msg in _read_points(path, [topic])]
 
 
 def read_images(path: PathLike, topic: str
-                ) -> Iterator[Tuple[int, str, Optional[np.ndarray], Optional[str]]]:
+                ) -> Iterator[tuple[int, str, np.ndarray | None, str | None]]:
     """
     Read an image topic as arrays, one message at a time (a bag of images can be large).
 
@@ -322,7 +372,8 @@ def read_images(path: PathLike, topic: str
     :raises BagError: the topic is missing or not an Image, or the bag is damaged
     """
     _check_types(path, [topic], IMAGE_TYPE)
-    for _, msg in _read_messages(path, [topic], IMAGE_TYPE):
+    for _, raw in _read_messages(path, [topic], IMAGE_TYPE):
+        msg = cast(_Image, raw)
         try:
             pixels = image_array(msg.data, msg.height, msg.width, msg.step, msg.encoding)
         except EncodingError as err:
@@ -331,13 +382,13 @@ def read_images(path: PathLike, topic: str
         yield _stamp_ns(msg), str(msg.encoding), pixels, None
 
 
-def _header(stamp_ns: int, frame_id: str):
+def _header(stamp_ns: int, frame_id: str) -> Msg:
     types = typestore().types
     stamp = types['builtin_interfaces/msg/Time'](**stamp_fields(stamp_ns))
     return types['std_msgs/msg/Header'](stamp=stamp, frame_id=frame_id)
 
 
-def point_message(stamp_ns: int, frame_id: str, x: float, y: float, z: float):
+def point_message(stamp_ns: int, frame_id: str, x: float, y: float, z: float) -> Msg:
     """
     Return a rosbags ``geometry_msgs/msg/PointStamped`` for :func:`write_messages`.
 
@@ -353,7 +404,8 @@ def point_message(stamp_ns: int, frame_id: str, x: float, y: float, z: float):
     return types[IMAGE_POINT_TYPE](header=_header(stamp_ns, frame_id), point=point)
 
 
-def image_message(stamp_ns: int, frame_id: str, pixels: np.ndarray, encoding: str = 'bgr8'):
+def image_message(stamp_ns: int, frame_id: str, pixels: np.ndarray, encoding: str = 'bgr8'
+                  ) -> Msg:
     """
     Return a rosbags ``sensor_msgs/msg/Image`` (rows unpadded) for :func:`write_messages`.
 
@@ -372,7 +424,7 @@ def image_message(stamp_ns: int, frame_id: str, pixels: np.ndarray, encoding: st
         is_bigendian=0, step=width * channels, data=pixels.reshape(-1))
 
 
-def write_messages(path: PathLike, messages: Iterable[Tuple[str, str, int, object]], *,
+def write_messages(path: PathLike, messages: Iterable[tuple[str, str, int, object]], *,
                    storage: str = 'mcap', compress: bool = False) -> int:
     """
     Write messages to a new bag.
@@ -423,7 +475,7 @@ def check_bag_stamps(path: PathLike, stamps: Iterable[int]) -> None:
                            f'{BAG_STAMP_MAX_NS} ns (Time.sec is an int32, log times unsigned)')
 
 
-def write_points(path: PathLike, rows: Iterable[Tuple[str, int, str, float, float, float]], *,
+def write_points(path: PathLike, rows: Iterable[tuple[str, int, str, float, float, float]], *,
                  storage: str = 'mcap') -> int:
     """
     Write PointStamped messages to a new bag, log time = header stamp.

@@ -39,10 +39,12 @@ write by a power cut is not covered (no fsync).  The core
 of the package: no rclpy.
 """
 
+from __future__ import annotations
+
 import os
 from pathlib import Path
 import struct
-from typing import Dict, List, Optional, Union
+from typing import Any
 
 import yaml
 
@@ -83,22 +85,22 @@ class CheckpointBagWriter:
     :param path: the bag directory to create (must not exist)
     """
 
-    def __init__(self, path: Union[str, os.PathLike]):
+    def __init__(self, path: str | os.PathLike[str]):
         self.path = Path(path)
         self.mcap_path = self.path / f'{self.path.name}.mcap'
-        self._fd: Optional[int] = None
-        self._schemas: Dict[str, int] = {}       # msgtype -> schema id
-        self._schema_records: List[bytes] = []
-        self._channel_records: List[bytes] = []
-        self._connections: List[_Connection] = []
+        self._fd: int | None = None
+        self._schemas: dict[str, int] = {}       # msgtype -> schema id
+        self._schema_records: list[bytes] = []
+        self._channel_records: list[bytes] = []
+        self._connections: list[_Connection] = []
         self._chunk = bytearray()                 # records of the open chunk
-        self._chunk_index: Dict[int, List[tuple]] = {}  # channel -> [(log time, offset)]
-        self._chunk_times = [None, None]
-        self._chunk_indexes: List[bytes] = []     # ChunkIndex records of the written chunks
+        self._chunk_index: dict[int, list[tuple[int, int]]] = {}  # channel -> [(log time, offset)]
+        self._chunk_times: tuple[int, int] | None = None  # (first, last) log time of the chunk
+        self._chunk_indexes: list[bytes] = []     # ChunkIndex records of the written chunks
         self._data_end = 0                        # where the summary of the last checkpoint starts
         self._tail_length = 0                     # its length, up to the closing magic
-        self._start_ns: Optional[int] = None
-        self._end_ns: Optional[int] = None
+        self._start_ns: int | None = None
+        self._end_ns: int | None = None
         #: Messages written, in total; checkpoints made.
         self.message_count = 0
         self.checkpoints = 0
@@ -172,9 +174,9 @@ class CheckpointBagWriter:
                              log_time_ns, log_time_ns)
         self._chunk += header
         self._chunk += data
-        start, end = self._chunk_times
-        self._chunk_times = [log_time_ns if start is None else min(start, log_time_ns),
-                             log_time_ns if end is None else max(end, log_time_ns)]
+        times = self._chunk_times
+        self._chunk_times = ((log_time_ns, log_time_ns) if times is None else
+                             (min(times[0], log_time_ns), max(times[1], log_time_ns)))
         connection.count += 1
         self.message_count += 1
         if len(self._chunk) > CHUNK_BYTES:
@@ -219,7 +221,7 @@ class CheckpointBagWriter:
             self._fd = None
 
     @property
-    def counts(self) -> Dict[str, int]:
+    def counts(self) -> dict[str, int]:
         """Return messages written per topic."""
         return {c.topic: c.count for c in self._connections}
 
@@ -228,8 +230,7 @@ class CheckpointBagWriter:
     def _close_chunk(self) -> bytes:
         """Return the open chunk as a Chunk record and its MessageIndex records; start anew."""
         records = bytes(self._chunk)
-        start, end = self._chunk_times
-        start, end = (0, 0) if start is None else (start, end)
+        start, end = self._chunk_times or (0, 0)
         chunk = _record(0x06, struct.pack('<QQQI', start, end, len(records), 0)
                         + _string('') + struct.pack('<Q', len(records)) + records)
         chunk_start = self._data_end
@@ -244,12 +245,12 @@ class CheckpointBagWriter:
             + struct.pack('<I', len(offset_map)) + offset_map
             + struct.pack('<Q', len(indexes)) + _string('')
             + struct.pack('<QQ', len(records), len(records))))
-        if self._chunk_times[0] is not None:
+        if self._chunk_times is not None:
             self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
             self._end_ns = end if self._end_ns is None else max(self._end_ns, end)
         self._chunk = bytearray()
         self._chunk_index = {}
-        self._chunk_times = [None, None]
+        self._chunk_times = None
         return chunk + indexes
 
     def _tail(self, offset: int, pad: int = 0) -> bytes:
@@ -272,7 +273,8 @@ class CheckpointBagWriter:
             '<QHIIIIQQI', self.message_count, len(self._schema_records),
             len(self._channel_records), 0, 1, len(self._chunk_indexes), start, end,
             len(counts)) + counts)
-        groups, position = [], summary_start
+        groups: list[bytes] = []
+        position = summary_start
         for opcode, block in ((0x03, schemas), (0x04, channels), (0x08, chunk_indexes),
                               (0x0D, metadata_index), (0x0B, statistics)):
             if block:
@@ -286,7 +288,7 @@ class CheckpointBagWriter:
 
     # -- metadata.yaml ----------------------------------------------------------------------------
 
-    def _information(self) -> dict:
+    def _information(self) -> dict[str, Any]:
         start = self._start_ns or 0
         duration = (self._end_ns - start) if self._end_ns is not None else 0
         return {
