@@ -66,7 +66,6 @@ infinite.
 
 from collections import Counter
 import math
-import numbers
 from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .camera import Camera
@@ -75,7 +74,7 @@ from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
 from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
-                     INPUT_DROP_REASONS, InputGate)
+                     INPUT_DROP_REASONS, InputGate, stamp_sort_key)
 from .trajectory import TrajectoryFuser
 
 __all__ = [
@@ -326,7 +325,7 @@ class Fuser:
         :return: the estimates in stamp order
         """
         estimates = []
-        for observation in sorted(observations, key=_sort_key):
+        for observation in sorted(observations, key=stamp_sort_key):
             estimate = self.update(observation)
             if estimate is None:
                 continue
@@ -469,14 +468,6 @@ class Fuser:
         return point
 
 
-def _sort_key(observation) -> tuple:
-    """Order observations by stamp; stamps that are not numbers (dropped later) go last."""
-    stamp = observation[1]
-    if isinstance(stamp, numbers.Real) and stamp == stamp:
-        return (0, stamp)
-    return (1, 0)
-
-
 def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
                method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
                max_gap_ns: Optional[int] = None, image_margin: Optional[float] = None,
@@ -500,25 +491,19 @@ def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
         (``update``, ``process``, ``reset``, ``stats``)
     :raises FuserConfigError: an unknown method or an invalid option
     """
-    gate_options = {'image_margin': image_margin, 'max_speed_mps': max_speed_mps,
-                    'workspace_min_m': workspace_min_m, 'workspace_max_m': workspace_max_m}
     if method == 'trajectory':
-        # Interim: the trajectory method keeps its own input checks until it uses the gates.
-        unbounded = all(corner is None or all(math.isinf(v) for v in corner)
-                        for corner in (workspace_min_m, workspace_max_m))
-        if (image_margin not in (None, DEFAULT_IMAGE_MARGIN) or not unbounded
-                or max_speed_mps != DEFAULT_MAX_SPEED_MPS):
-            raise FuserConfigError('image_margin, max_speed_mps and the workspace box are '
-                                   'not options of the trajectory method')
         return TrajectoryFuser(cameras, sync_tolerance_ns=sync_tolerance_ns,
-                               max_gap_ns=max_gap_ns, **method_options)
+                               max_gap_ns=max_gap_ns, image_margin=image_margin,
+                               max_speed_mps=max_speed_mps, workspace_min_m=workspace_min_m,
+                               workspace_max_m=workspace_max_m, **method_options)
     if method not in METHODS:
         raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
     if method_options:
         raise FuserConfigError(f'method {method!r} takes no option '
                                f'{", ".join(sorted(method_options))}')
     return Fuser(cameras, method=method, sync_tolerance_ns=sync_tolerance_ns,
-                 max_gap_ns=max_gap_ns, **gate_options)
+                 max_gap_ns=max_gap_ns, image_margin=image_margin, max_speed_mps=max_speed_mps,
+                 workspace_min_m=workspace_min_m, workspace_max_m=workspace_max_m)
 
 
 def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],

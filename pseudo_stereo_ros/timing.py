@@ -122,6 +122,7 @@ __all__ = [
     'INPUT_DROP_REASONS',
     'InputGate',
     'MIN_FRAME_INTERVAL_NS',
+    'stamp_sort_key',
 ]
 
 #: Default for treating two cameras' observations as simultaneous: 1 ms, 3% of a 30 fps period.
@@ -501,6 +502,21 @@ class InputGate:
         self._tolerance = tolerance
         self._floor = max(floor, tolerance)
         self._rig_gap = max(self._gap.values())
+
+
+def stamp_sort_key(observation: Observation) -> tuple[int, object]:
+    """
+    Order observations by stamp for offline processing; stamps that are not numbers go last.
+
+    (They are dropped by :meth:`InputGate.admit`; sorting must not fail on them.)
+
+    :param observation: an observation (any stamp)
+    :return: a sort key
+    """
+    stamp = observation[1]
+    if isinstance(stamp, numbers.Real) and stamp == stamp:
+        return (0, stamp)
+    return (1, 0)
 
 
 def _pixel_values(u: object, v: object) -> tuple[float, float] | str:

@@ -78,25 +78,42 @@ explains mean the path is lost: the fit restarts from them (``restarts``).
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
 used (when one camera stops seeing the ball, its last rays would be
 extrapolated); with no usable fit there is no estimate (``degenerate``).
-Estimates need two cameras with a detection within ``max_gap_ns``, as for the
-paper's method.
+Estimates need two cameras with a detection within their max gap (the input
+gate's), as for the paper's method.
 
-Input handling (camera, stamp, finite pixel, duplicates, sessions and
-gaps) is one call, :meth:`TrajectoryFuser._admit`, with the rules and drop
-reasons of :class:`pseudo_stereo_ros.fusion.Fuser`.
+**Input and plausibility.**  Every observation first passes the shared input
+and timing rules of :class:`~pseudo_stereo_ros.timing.InputGate` (validation,
+image margin, measured frame periods and max gaps, stamp outliers, sessions:
+:attr:`TrajectoryFuser.gate`), and every estimate the physical plausibility
+gate of :mod:`pseudo_stereo_ros.plausibility` (``max_speed_mps``, the
+optional workspace box), exactly as for :class:`pseudo_stereo_ros.fusion.Fuser`.
+A new session (the cameras agree on a jump of their stamps, or the rig
+resumes after a pause) starts a new flight: the window, the path and the
+impacts are forgotten, the measured noise is kept.  A camera that comes back
+after more than its max gap (``fresh`` for the gate) keeps its older frames in
+the window: they are rays at their own stamps, which the path fit uses
+without interpolating between them (the window is bounded by
+``max_window_s``); only its residual history, compared over its max gap, is
+too old to use.
+
+Counts: ``observations`` = ``estimates`` + drops (:data:`DROP_REASONS`, the
+paper fuser's plus ``pending``) + ``gate.held`` at all times.  The other keys
+are informational: ``late``, ``breaks``, ``restarts``, ``predicted`` (estimates
+at pending detections, among ``estimates``) and ``outlier`` (pending detections
+later judged stray; their event already counted as an estimate or a drop).
 """
 
 from collections import Counter
 import math
-import operator
 from typing import Iterable, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
 from .camera import Camera
 from .errors import FuserConfigError
+from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
-from .timing import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS
+from .timing import Admitted, INPUT_DROP_REASONS, InputGate, stamp_sort_key
 
 __all__ = [
     'DEFAULT_CONSISTENCY',
@@ -104,6 +121,7 @@ __all__ = [
     'DEFAULT_MAX_UNCERTAINTY',
     'DEFAULT_MAX_WINDOW_S',
     'DEFAULT_MIN_SIGMA_PX',
+    'DROP_REASONS',
     'TrajectoryFuser',
 ]
 
@@ -117,6 +135,18 @@ DEFAULT_GATE = 60.0
 DEFAULT_MIN_SIGMA_PX = 0.02
 #: Largest estimate standard deviation, in pixels of the newest camera per pixel of noise.
 DEFAULT_MAX_UNCERTAINTY = 8.0
+
+#: Why an observation gave no estimate (keys of :attr:`TrajectoryFuser.stats`): the input
+#: gate's reasons, then the method's.
+DROP_REASONS = {
+    **INPUT_DROP_REASONS,
+    'no_partner': 'fewer than two cameras have a detection within their max gap',
+    'warming_up': 'too few frames in the flight for a fit yet',
+    'degenerate': 'no fit (or prediction) determined well enough (max_uncertainty)',
+    'pending': 'the detection is off the path and pending_estimate is none',
+    'implausible': 'the estimate moved faster than max_speed_mps from the previous one, or '
+                   'lies outside the workspace box',
+}
 
 # Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
 _SCALE_NS = 100_000_000
@@ -178,16 +208,25 @@ class TrajectoryFuser:
     Causal multi-camera trajectory fit: one observation in, at most one estimate out.
 
     Same interface as :class:`pseudo_stereo_ros.fusion.Fuser` (``update``, ``process``,
-    ``reset``, ``stats``, ``camera_names``, ``max_gap_ns``, ``sync_tolerance_ns``).
+    ``reset``, ``stats``, ``gate``, ``session``, ``off_timeline``, ``camera_names``,
+    ``max_gap_ns``, ``sync_tolerance_ns``).
 
     :param cameras: the calibrated cameras (two or more; a sequence or a mapping name -> camera)
     :param sync_tolerance_ns: estimates of two cameras closer than this describe one instant
-        (:meth:`process` keeps the later, which saw both) [ns] (default 1 ms)
-    :param max_gap_ns: a pause of all cameras longer than this starts a new flight, and an
-        estimate needs two cameras with a detection within it [ns] (default 0.1 s)
+        (:meth:`process` keeps the later, which saw both) [ns] (default 1 ms; never more than
+        a quarter of the measured frame period: the input gate's)
+    :param max_gap_ns: upper bound of every camera's max gap (each uses at most 4.5 of its
+        measured frame periods): an estimate needs two cameras with a detection within
+        their max gap, and a pause of the rig longer than that starts a new flight [ns]
+        (default 0.1 s)
+    :param image_margin: see :class:`pseudo_stereo_ros.fusion.Fuser` (the shared input rules)
+    :param max_speed_mps: see :class:`pseudo_stereo_ros.fusion.Fuser` (the shared
+        plausibility gate) [m/s]
+    :param workspace_min_m: see :class:`pseudo_stereo_ros.fusion.Fuser` [m]
+    :param workspace_max_m: see :class:`pseudo_stereo_ros.fusion.Fuser` [m]
     :param max_window_s: longest window of the fit [s]
     :param consistency: Lepski's chi-square bound (3 d.o.f.) between windows' estimates
-    :param gate: chi-square bound (2 d.o.f.) beyond which a detection is pending
+    :param innovation_gate: chi-square bound (2 d.o.f.) beyond which a detection is pending
     :param min_sigma_px: floor of the measured detection noise [px]
     :param max_uncertainty: largest estimate standard deviation in pixels of the newest
         camera per pixel of detection noise
@@ -199,8 +238,13 @@ class TrajectoryFuser:
 
     def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
                  sync_tolerance_ns: Optional[int] = None, max_gap_ns: Optional[int] = None,
+                 image_margin: Optional[float] = None,
+                 max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Optional[Sequence[float]] = None,
+                 workspace_max_m: Optional[Sequence[float]] = None,
                  max_window_s: float = DEFAULT_MAX_WINDOW_S,
-                 consistency: float = DEFAULT_CONSISTENCY, gate: float = DEFAULT_GATE,
+                 consistency: float = DEFAULT_CONSISTENCY,
+                 innovation_gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
                  pending_estimate: str = 'impact'):
@@ -212,16 +256,27 @@ class TrajectoryFuser:
         names = [camera.name for camera in cameras]
         if len(set(names)) != len(names):
             raise FuserConfigError(f'camera names must be unique, got {names}')
-        self.sync_tolerance_ns = int(DEFAULT_SYNC_TOLERANCE_NS if sync_tolerance_ns is None
-                                     else sync_tolerance_ns)
-        self.max_gap_ns = int(DEFAULT_MAX_GAP_NS if max_gap_ns is None else max_gap_ns)
-        if self.sync_tolerance_ns < 0:
-            raise FuserConfigError(f'sync_tolerance_ns must be >= 0, got {self.sync_tolerance_ns}')
-        if self.max_gap_ns <= self.sync_tolerance_ns:
-            raise FuserConfigError(f'max_gap_ns ({self.max_gap_ns}) must exceed '
-                                   f'sync_tolerance_ns ({self.sync_tolerance_ns})')
+        #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
+        #: (impacts), ``outlier`` (pending detections judged stray), ``predicted`` (estimates
+        #: at pending detections), ``restarts`` (path lost, fitted afresh), and one key per
+        #: drop reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
+        #: ``gate.held`` at all times.
+        self.stats = Counter()
+        #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
+        self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
+                              max_gap_ns=max_gap_ns, image_margin=image_margin,
+                              stats=self.stats)
+        #: The plausibility gate of the estimates.
+        self.plausibility = PlausibilityGate(max_speed_mps=max_speed_mps,
+                                             workspace_min_m=workspace_min_m,
+                                             workspace_max_m=workspace_max_m,
+                                             window_ns=self.gate.max_gap_ns, stats=self.stats)
+        #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
+        self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
+        #: The configured upper bound of the max gap [ns].
+        self.max_gap_ns = self.gate.max_gap_ns
         for name, value in (('max_window_s', max_window_s), ('consistency', consistency),
-                            ('gate', gate), ('min_sigma_px', min_sigma_px),
+                            ('innovation_gate', innovation_gate), ('min_sigma_px', min_sigma_px),
                             ('max_uncertainty', max_uncertainty)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise FuserConfigError(f'{name} must be a finite number > 0, got {value!r}')
@@ -232,7 +287,7 @@ class TrajectoryFuser:
             raise FuserConfigError(f'unknown pending_estimate {pending_estimate!r}')
         self.max_window_ns = int(round(max_window_s * 1e9))
         self.consistency = float(consistency)
-        self.gate = float(gate)
+        self.innovation_gate = float(innovation_gate)
         self.min_sigma_px = float(min_sigma_px)
         self.max_uncertainty = float(max_uncertainty)
         self.order = int(order)
@@ -261,28 +316,48 @@ class TrajectoryFuser:
         # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
         self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
         self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
-        #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
-        #: (impacts), ``outlier`` (detections not fitted), ``predicted`` (estimates at pending
-        #: detections), ``restarts`` (path lost, fitted afresh), and one key per drop reason.
-        self.stats = Counter()
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px = None
         self._sigma_count = 0
         self._log_variance = None
-        self.reset()
+        self._forget()
 
     @property
     def camera_names(self) -> List[str]:
         """Return the configured camera names, in order."""
         return list(self._names)
 
+    @property
+    def sync_tolerance_ns(self) -> int:
+        """Return the sync tolerance in force [ns] (the gate's)."""
+        return self.gate.sync_tolerance_ns
+
+    @property
+    def session(self) -> int:
+        """Return the session number: it increments whenever the gate starts a new session."""
+        return self.gate.session
+
+    def off_timeline(self, stamp_ns: int) -> bool:
+        """
+        Tell whether a stamp jumps away from the current session (see the gate).
+
+        :param stamp_ns: the stamp [ns]
+        :return: True when farther than the rig's max gap from the session's newest stamp
+        """
+        return self.gate.off_timeline(stamp_ns)
+
     def reset(self) -> None:
-        """Forget the flight (the measured noise and the counters are kept)."""
+        """Forget the flight and the measured frame periods (noise and counters are kept)."""
+        self.gate.reset()
+        self._forget()
+
+    def _forget(self) -> None:
+        """Forget the flight (a new session): window, path, impacts, plausibility history."""
+        self.plausibility.reset()
         self._start = self._end = 0
         self._reference = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
         self._last = {}  # camera name -> its newest stamp
-        self._newest = None
         # The path of the newest estimate: (t_ref, beta (12,), covariance (12, 12) per px^2,
         # impact stamp or None).
         self._path = None
@@ -296,55 +371,6 @@ class TrajectoryFuser:
         self._previous = {}  # camera index -> stamp of its detection before the newest
         self._noise_residual = {}  # the same from the noise estimate's fixed-length fit
 
-    # -- input ----------------------------------------------------------------------------------
-
-    def _admit(self, observation: Observation):
-        """
-        Validate an observation and apply the session rules (one call).
-
-        The rules and drop reasons are those of :class:`pseudo_stereo_ros.fusion.Fuser`.
-
-        :return: ``(camera index, stamp, x, y, late)`` with normalized coordinates, or None
-            (the drop reason is counted)
-        """
-        stats = self.stats
-        camera, stamp, u, v = observation
-        index = self._index.get(camera)
-        if index is None:
-            stats['unknown_camera'] += 1
-            return None
-        if not (math.isfinite(u) and math.isfinite(v)):
-            stats['non_finite'] += 1
-            return None
-        try:
-            stamp = operator.index(stamp)  # ints and numpy integers; floats would lose ns
-        except TypeError:
-            stats['bad_stamp'] += 1
-            return None
-        newest = self._newest
-        if newest is not None and newest - stamp > self.max_gap_ns:
-            self.reset()  # time jumped back (a replay looping): a new session
-            stats['resets'] += 1
-            newest = None
-        last = self._last.get(camera)
-        if last is not None and stamp <= last:
-            stats['duplicate' if stamp == last else 'out_of_order'] += 1
-            return None
-        if newest is not None and stamp - newest > self.max_gap_ns:
-            self.reset()  # a pause of the whole rig: the next flight starts afresh
-            stats['resets'] += 1
-            newest = None
-        x, y = self._cameras[camera].normalize_one(u, v)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            stats['undistort_failed'] += 1
-            return None
-        self._previous[index] = self._last.get(camera)
-        self._last[camera] = stamp
-        late = newest is not None and stamp < newest
-        if not late:
-            self._newest = stamp
-        return index, stamp, x, y, late
-
     # -- the method -----------------------------------------------------------------------------
 
     def update(self, observation: Observation) -> Optional[Estimate]:
@@ -352,13 +378,39 @@ class TrajectoryFuser:
         Process one observation.
 
         :param observation: camera name, stamp [ns], raw pixel
-        :return: the estimate at this shutter event, or None (the reason is counted in stats)
+        :return: the estimate at this shutter event, or None (the reason is counted in stats,
+            or the observation is held by the gate until a new session is confirmed)
         """
-        self.stats['observations'] += 1
-        admitted = self._admit(observation)
-        if admitted is None:
+        admission = self.gate.admit(observation)
+        if admission.new_session:
+            self._forget()
+        result = None
+        for item in admission.ready:
+            # Only the last can give an estimate: the others open a session from one camera.
+            result = self._fuse(item)
+        return result
+
+    def _fuse(self, item: Admitted) -> Optional[Estimate]:
+        """Fit one admitted observation; return its plausible estimate, or None (counted)."""
+        camera, stamp, _, _ = item.observation
+        index = self._index[camera]
+        self._previous[index] = self._last.get(camera)
+        self._last[camera] = stamp
+        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+        if estimate is None:
             return None
-        index, stamp, x, y, late = admitted
+        plausibility = self.plausibility
+        plausibility.window_ns = self.gate.rig_gap_ns  # "recent": a few frame periods
+        if not plausibility.accept(stamp, estimate[2:5]):
+            return None
+        self.stats['estimates'] += 1
+        if estimate.kind == 'predicted':
+            self.stats['predicted'] += 1
+        return estimate
+
+    def _fit_frame(self, index: int, stamp: int, x: float, y: float,
+                   late: bool) -> Optional[Estimate]:
+        """Add a detection (normalized x, y) to the fit; return the estimate or None."""
         rotation = self._rotation[index]
         rows = rotation[:2] - np.outer((x, y), rotation[2])
         r0, r1, r2 = self._rotated_center[index]
@@ -388,13 +440,15 @@ class TrajectoryFuser:
 
         Observations are sorted by stamp first (ties keep their order).  Where two
         cameras' estimates are within ``sync_tolerance_ns`` of each other (synchronized
-        cameras), the later one, which saw both, supersedes the first.
+        cameras), the later one, which saw both, supersedes the first.  At the end, an
+        observation still held by the gate (a jump no camera confirmed) is dropped as
+        ``stamp_outlier``.
 
         :param observations: the observations, any order
         :return: the estimates in stamp order
         """
         estimates = []
-        for observation in sorted(observations, key=lambda obs: obs.stamp_ns):
+        for observation in sorted(observations, key=stamp_sort_key):
             estimate = self.update(observation)
             if estimate is None:
                 continue
@@ -403,6 +457,7 @@ class TrajectoryFuser:
                 estimates[-1] = estimate
             else:
                 estimates.append(estimate)
+        self.gate.flush()
         return estimates
 
     # -- frames ---------------------------------------------------------------------------------
@@ -538,7 +593,7 @@ class TrajectoryFuser:
             spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
             last = self._residual.get(index)
             if last is not None and last[1] == self._segment and \
-                    stamp - last[0] <= self.max_gap_ns:
+                    stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
                 # Against this camera's last residual: slowly varying biases (calibration)
                 # cancel.
                 innovation = innovation - last[2]
@@ -547,11 +602,11 @@ class TrajectoryFuser:
             if self._spread is not None:
                 spread = max(spread, self._spread)
             statistic = 2.0 * squared / spread
-            if statistic <= self.gate:
+            if statistic <= self.innovation_gate:
                 self._spread = squared if self._spread is None else self._spread + \
                     _SPREAD_ALPHA * (squared - self._spread)
         pending = self._pending
-        if statistic <= self.gate:
+        if statistic <= self.innovation_gate:
             if pending is not None:
                 self.stats['outlier'] += 1  # the path goes on: the pending one was stray
                 self._rejected[pending[1]] = (pending[0], self._pending_innovation)
@@ -567,7 +622,7 @@ class TrajectoryFuser:
             # off this camera's (one camera alone does not fix the depth). Fitted, it
             # corrects the path.
             return 'ok'
-        if pending is not None and stamp - pending[0] <= self.max_gap_ns:
+        if pending is not None and stamp - pending[0] <= self.gate.rig_gap_ns:
             if self._confirm_break(frame):
                 return 'inserted'
             # Two detections in a row off the path and not explained by an impact: the path
@@ -628,8 +683,6 @@ class TrajectoryFuser:
         if not np.all(np.isfinite(point)):
             self.stats['degenerate'] += 1
             return None
-        self.stats['estimates'] += 1
-        self.stats['predicted'] += 1
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'predicted')
 
@@ -676,7 +729,8 @@ class TrajectoryFuser:
             if found is None or before is None:
                 return False
             residual = float(found[0] @ found[0])
-            if residual > max(self.gate * spread, 0.1 * float(before[0] @ before[0])):
+            if residual > max(self.innovation_gate * spread,
+                              0.1 * float(before[0] @ before[0])):
                 return False
         self._start = first
         self._insert(pending)
@@ -726,8 +780,8 @@ class TrajectoryFuser:
         stats = self.stats
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
-        oldest = stamp - self.max_gap_ns
-        if sum(1 for last in self._last.values() if last >= oldest) < 2:
+        gaps = self.gate.max_gaps
+        if sum(1 for name, last in self._last.items() if stamp - last <= gaps[name]) < 2:
             stats['no_partner'] += 1
             return None
         if self._break_range is not None and \
@@ -743,7 +797,6 @@ class TrajectoryFuser:
         point = self._fit(stamp, index)
         if point is None:
             return None
-        stats['estimates'] += 1
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'trajectory')
 
@@ -951,7 +1004,8 @@ class TrajectoryFuser:
         residual = self._standardized(row, rhs, beta, inverse)
         last = self._noise_residual.get(index)
         self._noise_residual[index] = (stamp, self._segment, residual)
-        if last is not None and last[1] == self._segment and stamp - last[0] <= self.max_gap_ns:
+        if last is not None and last[1] == self._segment and \
+                stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
             change = residual - last[2]
             # Two axes, difference of two residuals: sample ~ sigma^2 * Exp(1), whose log has
             # mean log(sigma^2) - Euler's gamma. Averaging logs keeps rare large samples (a

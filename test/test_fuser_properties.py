@@ -15,8 +15,9 @@
 """
 Property-based tests of the core fuser on random streams (hypothesis).
 
-Two families of streams go through :meth:`Fuser.update` one observation at a
-time, as the fuser node feeds it:
+Two families of streams go through the ``update`` of every method's fuser
+(:func:`make_fuser`: paper, naive, trajectory) one observation at a time, as
+the fuser node feeds it:
 
 - *garbage*: any camera name, any stamp (ints of any size, floats, bools,
   None, strings) and any pixel (NaN, infinities, huge ints, strings, None,
@@ -38,12 +39,17 @@ import math
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.fusion import DROP_REASONS, Fuser
+from pseudo_stereo_ros.fusion import DROP_REASONS, make_fuser
 from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
                                              make_scenario, observe, truth_at)
+from pseudo_stereo_ros.trajectory import DROP_REASONS as TRAJECTORY_DROP_REASONS
 
 DEFAULT_MAX_SPEED_MPS = 60.0  # the fuser's default max_speed_mps (checked below)
+
+METHODS = st.sampled_from(['paper', 'naive', 'trajectory'])
+# Counts of the trajectory method that are no drop reason (see its module docstring).
+TRAJECTORY_INFO = {'breaks', 'outlier', 'predicted', 'restarts'}
 
 SETTINGS = settings(max_examples=60, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -58,10 +64,13 @@ def _rig(count):
 
 def _check_counts(fuser, returned):
     stats = fuser.stats
-    drops = sum(stats[key] for key in DROP_REASONS)
+    reasons, info = DROP_REASONS, set()
+    if fuser.method == 'trajectory':
+        reasons, info = TRAJECTORY_DROP_REASONS, TRAJECTORY_INFO
+    drops = sum(stats[key] for key in reasons)
     assert stats['observations'] == stats['estimates'] + drops + fuser.gate.held, dict(stats)
     assert stats['estimates'] == returned
-    assert set(stats) <= set(DROP_REASONS) | {'observations', 'estimates', 'resets', 'late'}
+    assert set(stats) <= set(reasons) | {'observations', 'estimates', 'resets', 'late'} | info
 
 
 def _feed(fuser, stream):
@@ -85,15 +94,14 @@ PIXELS = st.one_of(
 
 
 @SETTINGS
-@given(st.lists(st.tuples(NAMES, STAMPS, PIXELS, PIXELS), max_size=300),
-       st.sampled_from(['paper', 'naive']))
+@given(st.lists(st.tuples(NAMES, STAMPS, PIXELS, PIXELS), max_size=300), METHODS)
 def test_garbage_never_raises_nor_gives_nan_and_counts_add_up(rows, method):
-    fuser = Fuser(_rig(3), method=method)
+    fuser = make_fuser(_rig(3), method=method)
     estimates = _feed(fuser, [Observation(*row) for row in rows])
     _check_counts(fuser, len(estimates))
     assert fuser.stats['observations'] == len(rows)
     # The offline path as well (it sorts by stamp, whatever the stamps are).
-    offline = Fuser(_rig(3), method=method)
+    offline = make_fuser(_rig(3), method=method)
     offline.process([Observation(*row) for row in rows])
     assert offline.gate.held == 0
     assert offline.stats['observations'] == len(rows)
@@ -155,10 +163,10 @@ def messy_streams(draw):
 
 
 @SETTINGS
-@given(messy_streams(), st.sampled_from(['paper', 'naive']))
+@given(messy_streams(), METHODS)
 def test_messy_valid_streams_give_no_gross_estimate(case, method):
     cameras, scenario, _, stream, slowest_period_s = case
-    fuser = Fuser(cameras, method=method)
+    fuser = make_fuser(cameras, method=method)
     estimates = _feed(fuser, stream)
     _check_counts(fuser, len(estimates))
     if not estimates:
