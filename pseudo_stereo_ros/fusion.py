@@ -64,15 +64,17 @@ observation gives an estimate or exactly one drop reason of
 infinite.
 """
 
+from __future__ import annotations
+
 from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
 import math
-from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .camera import Camera
 from .errors import FuserConfigError
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
-from .records import Estimate, Observation
+from .records import Estimate, Observation, Point3
 from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
                      INPUT_DROP_REASONS, InputGate, stamp_sort_key)
 from .trajectory import TrajectoryFuser
@@ -121,7 +123,7 @@ class _Frame:
         self.ideal = ideal
         self.direction = direction
         # partner name -> pseudo-stereo point (or None when it could not be formed)
-        self.anchors = {}
+        self.anchors: dict[str, Point3 | None] = {}
 
 
 class _View:
@@ -136,9 +138,9 @@ class _View:
         k = camera.K
         self.k = (float(k[0, 0]), float(k[0, 1]), float(k[0, 2]), float(k[1, 1]),
                   float(k[1, 2]))
-        self.frames: List[_Frame] = []
+        self.frames: list[_Frame] = []
         # partner name -> F rows (plain floats) mapping this camera's ideal pixels to lines
-        self.fundamental = {}
+        self.fundamental: dict[str, tuple] = {}
 
     def ideal_to_direction(self, iu: float, iv: float) -> tuple:
         fx, skew, cx, fy, cy = self.k
@@ -167,12 +169,12 @@ class Fuser:
     :raises FuserConfigError: an invalid option, naming it
     """
 
-    def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
-                 method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
-                 max_gap_ns: Optional[int] = None, image_margin: Optional[float] = None,
-                 max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
-                 workspace_min_m: Optional[Sequence[float]] = None,
-                 workspace_max_m: Optional[Sequence[float]] = None):
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
+                 method: str = 'paper', sync_tolerance_ns: int | None = None,
+                 max_gap_ns: int | None = None, image_margin: float | None = None,
+                 max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Sequence[float] | None = None,
+                 workspace_max_m: Sequence[float] | None = None):
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -188,7 +190,7 @@ class Fuser:
         #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
         #: reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
         #: ``gate.held`` at all times.
-        self.stats = Counter()
+        self.stats: Counter[str] = Counter()
         #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
         self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
                               max_gap_ns=max_gap_ns, image_margin=image_margin,
@@ -213,7 +215,7 @@ class Fuser:
         self._update = self._paper if method == 'paper' else self._naive
 
     @property
-    def camera_names(self) -> List[str]:
+    def camera_names(self) -> list[str]:
         """Return the configured camera names, in order."""
         return list(self._views)
 
@@ -250,7 +252,7 @@ class Fuser:
             view.frames.clear()
         self.plausibility.reset()
 
-    def update(self, observation: Observation) -> Optional[Estimate]:
+    def update(self, observation: Observation) -> Estimate | None:
         """
         Process one observation.
 
@@ -267,7 +269,7 @@ class Fuser:
             result = self._fuse(item)
         return result
 
-    def _fuse(self, item: Admitted) -> Optional[Estimate]:
+    def _fuse(self, item: Admitted) -> Estimate | None:
         stats = self.stats
         camera, stamp, _, _ = item.observation
         view = self._views[camera]
@@ -310,7 +312,7 @@ class Fuser:
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
 
-    def process(self, observations: Iterable[Observation]) -> List[Estimate]:
+    def process(self, observations: Iterable[Observation]) -> list[Estimate]:
         """
         Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
 
@@ -324,7 +326,7 @@ class Fuser:
         :param observations: the observations, any order
         :return: the estimates in stamp order
         """
-        estimates = []
+        estimates: list[Estimate] = []
         for observation in sorted(observations, key=stamp_sort_key):
             estimate = self.update(observation)
             if estimate is None:
@@ -340,7 +342,7 @@ class Fuser:
 
     # -- methods --------------------------------------------------------------------------------
 
-    def _partner(self, view: _View, stamp: int) -> Optional[_View]:
+    def _partner(self, view: _View, stamp: int) -> _View | None:
         """Return the other camera that fired most recently within its max gap, if any."""
         best = None
         gaps = self.gate.max_gaps
@@ -385,7 +387,7 @@ class Fuser:
         oldest = frame.stamp - max(gaps[view.name], gaps[partner.name])
         own, theirs = view.frames, partner.frames
         i, j = len(own) - 2, len(theirs) - 1
-        anchors = []
+        anchors: list[tuple] = []
         while len(anchors) < 2 and (i >= 0 or j >= 0):
             if j < 0 or (i >= 0 and own[i].stamp > theirs[j].stamp):
                 candidate, x_view, y_view = own[i], view, partner
@@ -418,11 +420,10 @@ class Fuser:
             return None
         return point, 'pseudo'
 
-    def _anchor(self, frame: _Frame, x_view: _View, y_view: _View) -> Optional[tuple]:
+    def _anchor(self, frame: _Frame, x_view: _View, y_view: _View) -> Point3 | None:
         """Return the Steps I-III point at ``frame`` of camera X with camera Y (cached)."""
-        cached = frame.anchors.get(y_view.name, False)
-        if cached is not False:
-            return cached
+        if y_view.name in frame.anchors:
+            return frame.anchors[y_view.name]
         frames = y_view.frames
         stamp = frame.stamp
         k = len(frames) - 1
@@ -468,12 +469,12 @@ class Fuser:
         return point
 
 
-def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
-               method: str = 'paper', sync_tolerance_ns: Optional[int] = None,
-               max_gap_ns: Optional[int] = None, image_margin: Optional[float] = None,
-               max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
-               workspace_min_m: Optional[Sequence[float]] = None,
-               workspace_max_m: Optional[Sequence[float]] = None, **method_options):
+def make_fuser(cameras: Sequence[Camera] | Mapping[str, Camera], *,
+               method: str = 'paper', sync_tolerance_ns: int | None = None,
+               max_gap_ns: int | None = None, image_margin: float | None = None,
+               max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
+               workspace_min_m: Sequence[float] | None = None,
+               workspace_max_m: Sequence[float] | None = None, **method_options):
     """
     Build the fuser of a method: the one factory of ``track``, holdout, Table 1 and the node.
 
@@ -506,8 +507,8 @@ def make_fuser(cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
                  workspace_min_m=workspace_min_m, workspace_max_m=workspace_max_m)
 
 
-def fuse(cameras: Union[Sequence[Camera], Mapping[str, Camera]],
-         observations: Iterable[Observation], **options) -> Tuple[List[Estimate], Counter]:
+def fuse(cameras: Sequence[Camera] | Mapping[str, Camera],
+         observations: Iterable[Observation], **options) -> tuple[list[Estimate], Counter]:
     """
     Run a new fuser over recorded observations (see :meth:`Fuser.process`).
 
