@@ -22,10 +22,11 @@ one line naming the input and the reason and exit with status 2; nothing else
 is caught, so bugs still show their traceback.
 """
 
+from __future__ import annotations
+
 import argparse
 import importlib
 import sys
-from typing import List, Optional
 
 from . import COMMAND_MODULES
 from ..errors import PseudoStereoError
@@ -47,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)

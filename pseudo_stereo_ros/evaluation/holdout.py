@@ -38,8 +38,11 @@ Every method is scored on the same events: the held-out stamps at which all
 methods have a position.  This module is ROS-free.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 import math
-from typing import Dict, Mapping, NamedTuple, Optional, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -128,7 +131,7 @@ def _interpolate(stamps: np.ndarray, values: np.ndarray, query: np.ndarray,
 
 
 def estimates_at(estimates: Sequence, stamps_ns: np.ndarray, *,
-                 max_gap_ns: Optional[int] = None) -> np.ndarray:
+                 max_gap_ns: int | None = None) -> np.ndarray:
     """
     Positions of a fuser's estimates at other instants (see the module rule).
 
@@ -155,7 +158,7 @@ def _camera_samples(camera: Camera, observations: Sequence[Observation]) -> tupl
 
 
 def oracle_at(camera_a: Camera, camera_b: Camera, observations: Sequence[Observation],
-              stamps_ns: np.ndarray, *, max_gap_ns: Optional[int] = None) -> np.ndarray:
+              stamps_ns: np.ndarray, *, max_gap_ns: int | None = None) -> np.ndarray:
     """
     Interpolate two cameras' points to given stamps and triangulate (the non-causal oracle).
 
@@ -198,7 +201,7 @@ def held_out_errors(camera: Camera, points: np.ndarray, pixels: np.ndarray) -> n
 def three_camera_consistency(cameras: Mapping[str, Camera], observations: Sequence[Observation],
                              *, inputs: Sequence[str] = ('camera_1', 'camera_2'),
                              held_out: str = 'camera_3', method: str = 'trajectory',
-                             max_gap_ns: Optional[int] = None) -> Dict[str, float]:
+                             max_gap_ns: int | None = None) -> dict[str, float]:
     """
     Run a method on all three cameras and compare it with the two-camera run (no judge).
 
@@ -236,9 +239,9 @@ def three_camera_consistency(cameras: Mapping[str, Camera], observations: Sequen
 
 def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], *,
             inputs: Sequence[str] = ('camera_1', 'camera_2'), held_out: str = 'camera_3',
-            methods: Sequence[str] = HOLDOUT_METHODS, sync_tolerance_ns: Optional[int] = None,
-            max_gap_ns: Optional[int] = None,
-            method_options: Optional[Mapping[str, dict]] = None) -> Dict[str, HoldoutResult]:
+            methods: Sequence[str] = HOLDOUT_METHODS, sync_tolerance_ns: int | None = None,
+            max_gap_ns: int | None = None,
+            method_options: Mapping[str, dict] | None = None) -> dict[str, HoldoutResult]:
     """
     Score methods on two input cameras by reprojection into a held-out camera.
 

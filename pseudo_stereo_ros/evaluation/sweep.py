@@ -27,9 +27,12 @@ largest error.  :func:`impact_errors` measures the error right after each
 impact of the bouncing ball.  ROS-free; ``pseudo_stereo sweep`` prints it.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 import itertools
 import math
-from typing import Dict, List, NamedTuple, Optional, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -99,7 +102,7 @@ class CaseResult(NamedTuple):
         return self.mae_mm / self.paper_mae_mm
 
 
-def make_rig(name: str) -> List[Camera]:
+def make_rig(name: str) -> list[Camera]:
     """Return the cameras of a rig of :data:`RIGS`, named camera1, camera2, ..."""
     positions, focal, size, (k1, k2) = RIGS[name]
     return [Camera(look_at_calibration(f'camera{k + 1}', position, _TARGET, image_size=size,
@@ -107,7 +110,7 @@ def make_rig(name: str) -> List[Camera]:
             for k, position in enumerate(positions)]
 
 
-def _stamps(case: Case, duration_s: float, count: int, rng) -> List[np.ndarray]:
+def _stamps(case: Case, duration_s: float, count: int, rng) -> list[np.ndarray]:
     """Shutter stamps [ns] per camera: regular, or with jittered intervals (+-15%)."""
     period = 1.0 / case.fps
     stamps = []
@@ -133,7 +136,7 @@ def simulate_case(case: Case, cameras: Sequence[Camera]):
     return observations, truth_stamps, truth_at(scenario, truth_stamps)
 
 
-def run_case(case: Case, *, cameras: Optional[Sequence[Camera]] = None,
+def run_case(case: Case, *, cameras: Sequence[Camera] | None = None,
              **options) -> CaseResult:
     """
     Run ``paper`` (first two cameras) and ``trajectory`` (all cameras) on one case.
@@ -156,7 +159,7 @@ def run_case(case: Case, *, cameras: Optional[Sequence[Camera]] = None,
                       len(estimates) / events, float(errors.max()))
 
 
-def small_cases() -> List[Case]:
+def small_cases() -> list[Case]:
     """Return the in-suite sweep: every rig, rate, detection and timing, a few combinations."""
     cases = []
     rigs = ('default', 'wide', 'distorted')
@@ -167,7 +170,7 @@ def small_cases() -> List[Case]:
     return cases
 
 
-def full_cases() -> List[Case]:
+def full_cases() -> list[Case]:
     """Return the full sweep: every combination (144 cases)."""
     return [Case(rig, fps, offset, noise, jitter, scenario, seed=k)
             for k, (rig, fps, offset, noise, jitter, scenario) in enumerate(itertools.product(
@@ -175,7 +178,7 @@ def full_cases() -> List[Case]:
                 (False, True), ('straight', 'spiral', 'bounce')))]
 
 
-def summarize(results: Sequence[CaseResult]) -> Dict[str, float]:
+def summarize(results: Sequence[CaseResult]) -> dict[str, float]:
     """Return the geometric-mean ratio, the worst ratio, coverage and largest error."""
     ratios = np.array([r.ratio for r in results])
     return {'geometric_mean_ratio': float(np.exp(np.mean(np.log(ratios)))),
@@ -186,7 +189,7 @@ def summarize(results: Sequence[CaseResult]) -> Dict[str, float]:
 
 def impact_times(height: float = 2.0, restitution: float = 0.8, duration: float = 2.0):
     """Return the times [s] of the ``bounce`` scenario's impacts (its default parameters)."""
-    times: List[float] = []
+    times: list[float] = []
     t0, z0, vz0 = 0.0, height, 0.0
     while True:  # as the scenario: piecewise parabolas off the floor z = 0
         t_hit = (vz0 + math.sqrt(vz0 * vz0 + 2 * GRAVITY * z0)) / GRAVITY

@@ -22,8 +22,11 @@ compares estimates with the truth at their stamps.  Table 1 runs the one
 offline code path, :func:`pseudo_stereo_ros.fusion.fuse`.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Dict, List, NamedTuple, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -64,14 +67,14 @@ class Run:
     quantization_px: float = 0.05
     dropout: float = 0.0
     seed: int = 0
-    scenario_options: Dict = field(default_factory=dict)
+    scenario_options: dict = field(default_factory=dict)
 
 
 @dataclass
 class SimulatedData:
     """Observations of a run and the truth at every shutter stamp of either camera."""
 
-    observations: List[Observation]
+    observations: list[Observation]
     truth_stamps: np.ndarray
     truth_points: np.ndarray
 
@@ -170,13 +173,13 @@ ROW_RATES = {'unsynchronized': 30, 'proposed': 60, 'proposed*': 60, 'synchronize
 
 
 def run_table1(cameras: Sequence[Camera], *, noise_px: float = 0.0,
-               quantization_px: float = 0.05, seed: int = 0) -> Dict:
+               quantization_px: float = 0.05, seed: int = 0) -> dict:
     """
     Reproduce Table 1 on a rig.
 
     :return: {row label: {column label: (Score, estimates, SimulatedData)}}
     """
-    results: Dict[str, dict] = {}
+    results: dict[str, dict] = {}
     for row in TABLE1_ROWS:
         results[row.label] = {}
         for column, scenario in TABLE1_COLUMNS.items():
@@ -189,7 +192,7 @@ def run_table1(cameras: Sequence[Camera], *, noise_px: float = 0.0,
     return results
 
 
-def format_table1(results: Dict) -> str:
+def format_table1(results: dict) -> str:
     """Return Table 1 as text: ours beside the paper's, both metrics, labelled."""
     columns = list(TABLE1_COLUMNS)
     lines = [
@@ -220,7 +223,7 @@ def format_table1(results: Dict) -> str:
     return '\n'.join(lines)
 
 
-def plot_figure6(results: Dict, path) -> None:
+def plot_figure6(results: dict, path) -> None:
     """
     Write a PNG like the paper's Fig. 6: truth, proposed and unsynchronized per motion.
 

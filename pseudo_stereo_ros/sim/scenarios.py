@@ -21,9 +21,11 @@ for a few seconds); shutter stamps are integer nanoseconds from
 everything downstream is exercised with real-sized stamps.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -132,7 +134,7 @@ def _turntable(radius: float = 0.5, height: float = 0.65, rpm: float = 45.0,
 
 
 #: Scenario name -> factory taking keyword overrides of its parameters.
-SCENARIOS: Dict[str, Callable[..., Scenario]] = {
+SCENARIOS: dict[str, Callable[..., Scenario]] = {
     'straight': _straight,
     'spiral': _spiral,
     'bounce': _bounce,
@@ -180,7 +182,7 @@ def truth_at(scenario: Scenario, stamps_ns: np.ndarray, *,
 
 def observe(scenario: Scenario, cameras: Sequence[Camera], stamps: Sequence[np.ndarray], *,
             noise_px: float = 0.0, quantization_px: float = 0.05, dropout: float = 0.0,
-            seed: int = 0, epoch_ns: int = DEFAULT_EPOCH_NS) -> List[Observation]:
+            seed: int = 0, epoch_ns: int = DEFAULT_EPOCH_NS) -> list[Observation]:
     """
     Project the trajectory into each camera at its shutter stamps.
 
@@ -196,7 +198,7 @@ def observe(scenario: Scenario, cameras: Sequence[Camera], stamps: Sequence[np.n
     :return: observations of points inside the images, sorted by stamp
     """
     rng = np.random.default_rng(seed)
-    observations: List[Observation] = []
+    observations: list[Observation] = []
     for camera, camera_stamps in zip(cameras, stamps):
         camera_stamps = np.asarray(camera_stamps, dtype=np.int64)
         pixels = camera.project(truth_at(scenario, camera_stamps, epoch_ns=epoch_ns))
@@ -216,7 +218,7 @@ def observe(scenario: Scenario, cameras: Sequence[Camera], stamps: Sequence[np.n
 def look_at_calibration(name: str, position: Sequence[float], target: Sequence[float], *,
                         image_size=(640, 480), focal_px: float = 500.0,
                         distortion_model: str = 'plumb_bob',
-                        dist_coeffs: Optional[Sequence[float]] = None) -> CameraCalibration:
+                        dist_coeffs: Sequence[float] | None = None) -> CameraCalibration:
     """
     Build the calibration of a camera at ``position`` looking at ``target`` (world z up).
 
@@ -250,6 +252,6 @@ def look_at_calibration(name: str, position: Sequence[float], target: Sequence[f
         translation=-rotation @ center)
 
 
-def default_rig() -> List[Camera]:
+def default_rig() -> list[Camera]:
     """Return the two cameras of the default rig (``config/rig/camera{1,2}.yaml``)."""
     return Rig.default().cameras
