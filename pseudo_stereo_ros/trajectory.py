@@ -103,9 +103,12 @@ at pending detections, among ``estimates``) and ``outlier`` (pending detections
 later judged stray; their event already counted as an estimate or a drop).
 """
 
+from __future__ import annotations
+
 from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
 import math
-from typing import Iterable, List, Mapping, Optional, Sequence, Union
+from typing import TypeAlias
 
 import numpy as np
 
@@ -189,7 +192,18 @@ _VERTICAL_SINE = 0.5
 _IMPACT_REACH = 5.0
 
 
-_SIZES = {}
+# A detection to fit: (stamp [ns], camera index, rows (2, 3), right-hand sides (2,), weight).
+_Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
+# A path: (reference stamp [ns], beta (12,), covariance (12, 12) per px^2, impact stamp or None).
+_Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
+# A camera's residual: (stamp [ns], segment, standardized residual (2,) [px]).
+_Residual: TypeAlias = tuple[int, int, np.ndarray]
+# One window's solution: (columns, beta (m,), inverse (m, m)).
+_Solution: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray]
+# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), solutions).
+_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, list[_Solution]]
+
+_SIZES: dict[int, np.ndarray] = {}
 _EYE3 = np.eye(3)
 _EYE12 = np.eye(12)
 _UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
@@ -236,18 +250,18 @@ class TrajectoryFuser:
 
     method = 'trajectory'
 
-    def __init__(self, cameras: Union[Sequence[Camera], Mapping[str, Camera]], *,
-                 sync_tolerance_ns: Optional[int] = None, max_gap_ns: Optional[int] = None,
-                 image_margin: Optional[float] = None,
-                 max_speed_mps: Optional[float] = DEFAULT_MAX_SPEED_MPS,
-                 workspace_min_m: Optional[Sequence[float]] = None,
-                 workspace_max_m: Optional[Sequence[float]] = None,
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
+                 sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,
+                 image_margin: float | None = None,
+                 max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Sequence[float] | None = None,
+                 workspace_max_m: Sequence[float] | None = None,
                  max_window_s: float = DEFAULT_MAX_WINDOW_S,
                  consistency: float = DEFAULT_CONSISTENCY,
                  innovation_gate: float = DEFAULT_GATE,
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
-                 pending_estimate: str = 'impact'):
+                 pending_estimate: str = 'impact') -> None:
         if isinstance(cameras, Mapping):
             cameras = list(cameras.values())
         cameras = list(cameras)
@@ -261,7 +275,7 @@ class TrajectoryFuser:
         #: at pending detections), ``restarts`` (path lost, fitted afresh), and one key per
         #: drop reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
         #: ``gate.held`` at all times.
-        self.stats = Counter()
+        self.stats: Counter[str] = Counter()
         #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
         self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
                               max_gap_ns=max_gap_ns, image_margin=image_margin,
@@ -317,13 +331,13 @@ class TrajectoryFuser:
         self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
         self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
-        self.sigma_px = None
+        self.sigma_px: float | None = None
         self._sigma_count = 0
-        self._log_variance = None
+        self._log_variance: float | None = None
         self._forget()
 
     @property
-    def camera_names(self) -> List[str]:
+    def camera_names(self) -> list[str]:
         """Return the configured camera names, in order."""
         return list(self._names)
 
@@ -355,25 +369,31 @@ class TrajectoryFuser:
         """Forget the flight (a new session): window, path, impacts, plausibility history."""
         self.plausibility.reset()
         self._start = self._end = 0
-        self._reference = None  # stamp of the prefix sums' coefficients [ns]
+        self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
-        self._last = {}  # camera name -> its newest stamp
-        # The path of the newest estimate: (t_ref, beta (12,), covariance (12, 12) per px^2,
-        # impact stamp or None).
-        self._path = None
-        self._pending = None  # a detection not fitted yet: (stamp, camera, rows, rhs, weight)
-        self._break = None  # stamp of the impact inside the window [ns], or None
-        self._break_range = None  # (low, high) [ns] while its time is being refined
+        self._last: dict[str, int] = {}  # camera name -> its newest stamp
+        self._path: _Path | None = None  # the path of the newest estimate
+        self._pending: _Frame | None = None  # a detection not fitted yet
+        # Its innovation (2,) [px] against the path (None when its depth was not positive).
+        self._pending_innovation: np.ndarray | None = None
+        self._break: int | None = None  # stamp of the impact inside the window [ns], or None
+        # (low, high) [ns] while the impact's time is being refined.
+        self._break_range: tuple[int, int] | None = None
         self._segment = 0  # counts impacts: residuals are compared within a segment only
-        self._spread = None  # running spread of accepted innovations, per axis [px^2]
-        self._residual = {}  # camera index -> (stamp, segment, standardized residual (2,))
-        self._rejected = {}  # camera index -> stamp of its last detection taken as an outlier
-        self._previous = {}  # camera index -> stamp of its detection before the newest
-        self._noise_residual = {}  # the same from the noise estimate's fixed-length fit
+        # Running spread of accepted innovations, per axis [px^2].
+        self._spread: float | None = None
+        # Camera index -> its newest residual in the fit.
+        self._residual: dict[int, _Residual] = {}
+        # Camera index -> (stamp, innovation or None) of its last detection taken as an outlier.
+        self._rejected: dict[int, tuple[int, np.ndarray | None]] = {}
+        # Camera index -> stamp of its detection before the newest (None: it had none).
+        self._previous: dict[int, int | None] = {}
+        # Camera index -> the same as _residual from the noise estimate's fixed-length fit.
+        self._noise_residual: dict[int, _Residual] = {}
 
     # -- the method -----------------------------------------------------------------------------
 
-    def update(self, observation: Observation) -> Optional[Estimate]:
+    def update(self, observation: Observation) -> Estimate | None:
         """
         Process one observation.
 
@@ -390,7 +410,7 @@ class TrajectoryFuser:
             result = self._fuse(item)
         return result
 
-    def _fuse(self, item: Admitted) -> Optional[Estimate]:
+    def _fuse(self, item: Admitted) -> Estimate | None:
         """Fit one admitted observation; return its plausible estimate, or None (counted)."""
         camera, stamp, _, _ = item.observation
         index = self._index[camera]
@@ -409,7 +429,7 @@ class TrajectoryFuser:
         return estimate
 
     def _fit_frame(self, index: int, stamp: int, x: float, y: float,
-                   late: bool) -> Optional[Estimate]:
+                   late: bool) -> Estimate | None:
         """Add a detection (normalized x, y) to the fit; return the estimate or None."""
         rotation = self._rotation[index]
         rows = rotation[:2] - np.outer((x, y), rotation[2])
@@ -421,8 +441,8 @@ class TrajectoryFuser:
             predicted = float(rotation[2] @ prediction[0]) - r2
             if predicted > 0.0:
                 depth = predicted
-        frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
-                 self._focal[index] / depth)
+        frame: _Frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
+                         self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         else:
@@ -434,7 +454,7 @@ class TrajectoryFuser:
         self._insert(frame)
         return self._estimate(stamp, index)
 
-    def process(self, observations: Iterable[Observation]) -> List[Estimate]:
+    def process(self, observations: Iterable[Observation]) -> list[Estimate]:
         """
         Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
 
@@ -447,7 +467,7 @@ class TrajectoryFuser:
         :param observations: the observations, any order
         :return: the estimates in stamp order
         """
-        estimates = []
+        estimates: list[Estimate] = []
         for observation in sorted(observations, key=stamp_sort_key):
             estimate = self.update(observation)
             if estimate is None:
@@ -462,10 +482,10 @@ class TrajectoryFuser:
 
     # -- frames ---------------------------------------------------------------------------------
 
-    def _arrays(self):
+    def _arrays(self) -> tuple[np.ndarray, ...]:
         return self._stamp, self._camera, self._rows, self._rhs, self._weight
 
-    def _insert(self, frame) -> None:
+    def _insert(self, frame: _Frame) -> None:
         """Insert a frame in time order and forget frames beyond the longest window."""
         stamp, index, rows, rhs, weight = frame
         rebuild = None
@@ -503,9 +523,11 @@ class TrajectoryFuser:
     def _rebuild(self, first: int) -> None:
         """Recompute the prefix sums from frame ``first`` on (``first == _start``: from 0)."""
         end = self._end
+        reference = self._reference
+        assert reference is not None, 'the window holds frames, so _insert set the reference'
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
-            row = self._position_row(stamp - self._reference,
+            row = self._position_row(stamp - reference,
                                      None if self._break is None else stamp - self._break)
             weight = self._weight[first]
             design = self._rows[first] @ row * weight
@@ -518,7 +540,7 @@ class TrajectoryFuser:
             self._prefix_moment[first] = 0.0
         stamps = self._stamp[first:end]
         jump = None if self._break is None else stamps - self._break
-        maps = self._position_map(stamps - self._reference, jump)
+        maps = self._position_map(stamps - reference, jump)
         weight = self._weight[first:end, None, None]
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
         rhs = self._rhs[first:end] * weight[:, :, 0]
@@ -532,7 +554,7 @@ class TrajectoryFuser:
     # -- the path -------------------------------------------------------------------------------
 
     @staticmethod
-    def _position_map(offsets_ns: np.ndarray, jump_offsets_ns) -> np.ndarray:
+    def _position_map(offsets_ns: np.ndarray, jump_offsets_ns: np.ndarray | None) -> np.ndarray:
         """
         Return (N, 3, 12) maps from the coefficients to positions.
 
@@ -551,7 +573,7 @@ class TrajectoryFuser:
         return maps
 
     @staticmethod
-    def _position_row(offset_ns: int, jump_offset_ns) -> np.ndarray:
+    def _position_row(offset_ns: int, jump_offset_ns: int | None) -> np.ndarray:
         """Return the (3, 12) map of :meth:`_position_map` at one time (the fast path)."""
         tau = offset_ns / _SCALE_NS
         row = np.zeros((3, 12))
@@ -562,13 +584,15 @@ class TrajectoryFuser:
             row[0, 9] = row[1, 10] = row[2, 11] = jump_offset_ns / _SCALE_NS
         return row
 
-    def _predict(self, stamp: int):
+    def _predict(self, stamp: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
+        assert self._path is not None, 'predictions are made only once a path was fitted'
         t_ref, beta, covariance, t_break = self._path
         row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
         return row @ beta, row @ covariance @ row.T
 
-    def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray, point: np.ndarray):
+    def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray,
+                    point: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """Return (innovation (2,) px, Jacobian (2, 3) px/m) of a detection, or None."""
         depth = float(self._rotation[index, 2] @ (point - self._center[index]))
         if not depth > 0.0:
@@ -578,7 +602,8 @@ class TrajectoryFuser:
 
     # -- impacts and outliers -------------------------------------------------------------------
 
-    def _check(self, frame, prediction) -> str:
+    def _check(self, frame: _Frame,
+               prediction: tuple[np.ndarray, np.ndarray] | None) -> str:
         """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
         stamp, index, rows, rhs, _ = frame
         if prediction is None or self._break_range is not None or \
@@ -589,6 +614,7 @@ class TrajectoryFuser:
         statistic = math.inf
         if found is not None:
             innovation, jacobian = found
+            assert self.sigma_px is not None, 'a mature noise estimate has a value'
             sigma2 = self.sigma_px ** 2
             spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
             last = self._residual.get(index)
@@ -647,7 +673,7 @@ class TrajectoryFuser:
         self._break_range = None
         self._segment += 1
 
-    def _pending_estimate(self, frame) -> Optional[Estimate]:
+    def _pending_estimate(self, frame: _Frame) -> Estimate | None:
         """Return the estimate at a pending detection's event: the predicted position."""
         stamp, index = frame[0], frame[1]
         if self.pending_estimate == 'none':
@@ -667,10 +693,12 @@ class TrajectoryFuser:
             # (within 30 degrees) and by no more than reversing the ball's velocity since the
             # last fitted frame could carry it.  Otherwise (a stray detection) the prediction.
             found = self._innovation(index, frame[2], frame[3], point)
-            vertical = None if found is None else found[1][:, 2]
-            if found is None or abs(found[0][0] * vertical[1] - found[0][1] * vertical[0]) > \
-                    _VERTICAL_SINE * float(np.linalg.norm(found[0]) * np.linalg.norm(vertical)):
-                vertical = None
+            vertical = None
+            if found is not None:
+                vertical = found[1][:, 2]
+                if abs(found[0][0] * vertical[1] - found[0][1] * vertical[0]) > _VERTICAL_SINE \
+                        * float(np.linalg.norm(found[0]) * np.linalg.norm(vertical)):
+                    vertical = None
             direction = np.cross(frame[2][0], frame[2][1])
             weights = np.array((9.0, 9.0, 1.0))
             offset = point - self._center[index]
@@ -686,9 +714,10 @@ class TrajectoryFuser:
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'predicted')
 
-    def _confirm_break(self, frame) -> bool:
+    def _confirm_break(self, frame: _Frame) -> bool:
         """Test an impact between the last consistent frames and the pending one."""
         pending = self._pending
+        assert pending is not None, '_check confirms an impact only with a pending detection'
         start, end = self._start, self._end
         first = start  # frames after an earlier impact only: one jump per window
         if self._break is not None:
@@ -711,7 +740,7 @@ class TrajectoryFuser:
             later = high if later is None else int(self._stamp[later])
             middle = (int(self._stamp[earlier]) + later) // 2
             found = self._refine_break((stamps, rows, rhs, weights), int(frame[0]), middle,
-                                       middle, with_rss=True)
+                                       middle)
             if found is not None and (best is None or found[0] < best[0]):
                 best = found
         if best is None:
@@ -721,14 +750,15 @@ class TrajectoryFuser:
         # least ten times smaller (squared) than without it (the impact time is only known
         # to a grid step until later frames refine it).
         maps = self._position_map(stamps[-2:] - int(frame[0]), stamps[-2:] - t_break)
+        assert self.sigma_px is not None, '_check gates detections only with a mature noise'
         spread = max(self.sigma_px ** 2, self._spread or 0.0)
         for k in (-2, -1):
-            found = self._innovation(int(cameras[k]), rows[k], rhs[k], maps[k] @ beta)
+            after = self._innovation(int(cameras[k]), rows[k], rhs[k], maps[k] @ beta)
             before = self._innovation(int(cameras[k]), rows[k], rhs[k],
                                       self._predict(int(stamps[k]))[0])
-            if found is None or before is None:
+            if after is None or before is None:
                 return False
-            residual = float(found[0] @ found[0])
+            residual = float(after[0] @ after[0])
             if residual > max(self.innovation_gate * spread,
                               0.1 * float(before[0] @ before[0])):
                 return False
@@ -743,8 +773,10 @@ class TrajectoryFuser:
         self.stats['breaks'] += 1
         return True
 
-    def _refine_break(self, frames, stamp: int, low: int, high: int, *, with_rss=False):
-        """Return (impact stamp, beta) minimizing the fit's residual over a grid, or None."""
+    def _refine_break(self, frames: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                      stamp: int, low: int,
+                      high: int) -> tuple[float, int, np.ndarray] | None:
+        """Return (residual sum of squares, impact stamp, beta) minimizing it on a grid or None."""
         stamps, rows, rhs, weights = frames
         if low == high:
             candidates = np.array((low,), dtype=np.int64)
@@ -754,7 +786,7 @@ class TrajectoryFuser:
         base = self._position_map(offsets, None)  # (n, 3, 12) without the jump
         design = np.einsum('nra,nam->nrm', rows, base) * weights[:, None, None]
         vector = (rhs * weights[:, None]).reshape(-1)
-        best = None
+        best: tuple[float, int, np.ndarray] | None = None
         for t_break in candidates:
             jump = np.maximum(0.0, (stamps - t_break).astype(float) / _SCALE_NS)
             if not np.any(jump > 0.0):
@@ -769,13 +801,11 @@ class TrajectoryFuser:
             rss = float(residual @ residual)
             if best is None or rss < best[0]:
                 best = (rss, int(t_break), beta)
-        if best is None:
-            return None
-        return best if with_rss else best[1:]
+        return best
 
     # -- the fit --------------------------------------------------------------------------------
 
-    def _estimate(self, stamp: int, index: int) -> Optional[Estimate]:
+    def _estimate(self, stamp: int, index: int) -> Estimate | None:
         """Fit the windows at ``stamp`` and return the estimate (or None, counted)."""
         stats = self.stats
         start, end = self._start, self._end
@@ -789,8 +819,8 @@ class TrajectoryFuser:
             low, high = self._break_range
             best = self._refine_break((stamps, self._rows[start:end], self._rhs[start:end],
                                        self._weight[start:end]), stamp, low, high)
-            if best is not None and best[0] != self._break:
-                self._break = best[0]
+            if best is not None and best[1] != self._break:
+                self._break = best[1]
                 self._rebuild(start)
             if np.count_nonzero(stamps > high) >= _REFINE_FRAMES:
                 self._break_range = None
@@ -800,7 +830,7 @@ class TrajectoryFuser:
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'trajectory')
 
-    def _fit(self, stamp: int, index: int) -> Optional[np.ndarray]:
+    def _fit(self, stamp: int, index: int) -> np.ndarray | None:
         """Fit the nested windows, choose one (Lepski) and return the position at ``stamp``."""
         start, end = self._start, self._end
         count = end - start
@@ -812,6 +842,7 @@ class TrajectoryFuser:
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
         sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
             np.array((count,))
+        assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
         shift = _EYE12[:unknowns, :unknowns].copy()
@@ -821,7 +852,7 @@ class TrajectoryFuser:
                               - gram[end - sizes, :unknowns, :unknowns]) @ shift
         moments = (moment[end, :unknowns] - moment[end - sizes, :unknowns]) @ shift
         position = self._position_row(0, None if t_break is None else stamp - t_break)
-        kept = None
+        kept: _Fits | None = None
         if self.order == 2 and count >= _WINDOWS[0]:
             if t_break is None:
                 kept = self._fits(matrices, moments, sizes, 9, position, index)
@@ -870,7 +901,8 @@ class TrajectoryFuser:
                                     reference_inverse)
         return point
 
-    def _window_system(self, stamp: int, first: int, end: int):
+    def _window_system(self, stamp: int, first: int,
+                       end: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
         stamps = self._stamp[first:end]
         maps = self._position_map(stamps - stamp, None)
@@ -880,7 +912,7 @@ class TrajectoryFuser:
         return (np.einsum('nri,nrj->ij', design, design)[None],
                 np.einsum('nri,nr->i', design, rhs)[None])
 
-    def _refresh_weights(self, stamp: int, beta: np.ndarray, t_break) -> None:
+    def _refresh_weights(self, stamp: int, beta: np.ndarray, t_break: int | None) -> None:
         """Set the weights of a new flight's first frames from its first path."""
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
@@ -894,7 +926,8 @@ class TrajectoryFuser:
             self._rebuild(start)
             self._weights_guessed = False
 
-    def _fits(self, matrices, moments, sizes, columns, position, index):
+    def _fits(self, matrices: np.ndarray, moments: np.ndarray, sizes: np.ndarray,
+              columns: int | np.ndarray, position: np.ndarray, index: int) -> _Fits | None:
         """
         Solve window systems; keep the determined, well-conditioned ones.
 
@@ -938,7 +971,7 @@ class TrajectoryFuser:
                 [(columns, betas[k], inverses[k]) for k in good])
 
     @staticmethod
-    def _merge(first, second):
+    def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
         """Merge two results of :meth:`_fits` in order of window size."""
         if first is None or second is None:
             return second if first is None else first
@@ -949,7 +982,8 @@ class TrajectoryFuser:
                 [(first[3] + second[3])[k] for k in order])
 
     @staticmethod
-    def _full(columns, beta, inverse):
+    def _full(columns: np.ndarray, beta: np.ndarray,
+              inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
         full_beta = np.zeros(12)
         full_inverse = np.zeros((12, 12))
@@ -987,12 +1021,14 @@ class TrajectoryFuser:
         return int(failing[0] - 1) if len(failing) else count - 1
 
     @staticmethod
-    def _standardized(row, rhs, beta, inverse) -> np.ndarray:
+    def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
+                      inverse: np.ndarray) -> np.ndarray:
         """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
         leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
         return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
 
-    def _measure_noise(self, stamp, index, row, rhs, beta, inverse) -> None:
+    def _measure_noise(self, stamp: int, index: int, row: np.ndarray, rhs: np.ndarray,
+                       beta: np.ndarray, inverse: np.ndarray) -> None:
         """
         Update the detection noise from the newest frame's residual (Rice's estimator).
 
