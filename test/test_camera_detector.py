@@ -315,13 +315,14 @@ def test_three_virtual_cameras_give_the_summed_rate_and_beat_every_pair(tmp_path
     shutters = sorted(int(s) for c in cameras for s in shutter_stamps(
         c['fps'], scenario.duration_s, phase_s=c['phase_s'], epoch_ns=epoch))
     assert all(epoch <= p.stamp_ns <= flight_end for p in points)
-    # The cameras ran at their rates (a machine too loaded to render skips a few frames) ...
-    assert len(points) >= 0.9 * len(shutters)
+    # The cameras ran at their rates (a machine too loaded to render skips a few frames; the
+    # bound stays above 0.75, the share of the shutters of the best pair, a + c: 90 of 120 Hz) ...
+    assert len(points) >= 0.8 * len(shutters)
     # ... and the fuser gave one position per shutter event of any camera, 120 Hz in flight,
     # but the 3 warm-up events. Counted where they are published: the fuser's history of 10
     # positions drops some for a subscriber a loaded machine delays by more than 10 events.
     assert len(points) - 3 - 2 <= published <= len(points)
-    assert published / scenario.duration_s >= 0.9 * 120 * (1 - 3 / len(shutters))
+    assert published / scenario.duration_s >= 0.8 * 120 * (1 - 3 / len(shutters))  # > 90 Hz
     assert len(positions) >= 0.8 * published
     assert {p[0] for p in positions} <= set(shutters)
     # The live positions are the offline fuser's on the same points ...
