@@ -27,4 +27,6 @@ COMMAND_MODULES = [
     'holdout',
     'calibrate',
     'check',
+    'sync',
+    'refine',
 ]

@@ -31,6 +31,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..evaluation.holdout import holdout, HOLDOUT_METHODS
 from ..formats.bagio import read_observations
+from ..timesync import apply_time_offsets, camera_time_offsets
 
 NAME = 'holdout'
 HELP = ('run two cameras of a bag through each method and score the estimates by reprojection '
@@ -68,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
                else seconds_to_ns(args.max_gap, '--max-gap')}
     rows = []
     for bag in args.bags:
-        observations = read_observations(bag, names)
+        # Each camera's time_offset_s (calibration file) puts its stamps on the common clock.
+        observations = apply_time_offsets(read_observations(bag, names),
+                                          camera_time_offsets(cameras))
         results = holdout(cameras, observations, inputs=args.inputs,
                           held_out=args.held_out, methods=args.methods, **options)
         for method, result in results.items():

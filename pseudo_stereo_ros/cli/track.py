@@ -33,7 +33,8 @@ import numpy as np
 import yaml
 
 from . import UsageError
-from .common import add_camera_argument, cameras_from_args, seconds_to_ns
+from .common import (add_camera_argument, cameras_from_args, seconds_to_ns,
+                     time_offsets_from_args)
 from ..detection import BallDetector
 from ..evaluation.table1 import score
 from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_point_topic,
@@ -42,6 +43,7 @@ from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_poi
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
 from ..records import Observation
+from ..timesync import apply_time_offsets, camera_time_offsets
 
 NAME = 'track'
 HELP = ('run the fuser offline on observations (stamp_ns,camera,u,v CSV, or image points or '
@@ -69,6 +71,9 @@ def add_arguments(parser) -> None:
     parser.add_argument('--output-bag', metavar='OUT',
                         help='a new bag (mcap) with the estimates on /ball/position')
     parser.add_argument('--method', choices=METHODS, default='paper')
+    parser.add_argument('--time-offset', action='append', default=[], metavar='NAME=SECONDS',
+                        help="add SECONDS to camera NAME's stamps (overrides the time_offset_s "
+                             'of its calibration file; repeat per camera)')
     parser.add_argument('--sync-tolerance', type=float, default=DEFAULT_SYNC_TOLERANCE_NS / 1e9,
                         metavar='S', help='observations closer than this are simultaneous '
                                           '(default: %(default)s s)')
@@ -183,6 +188,7 @@ def run(args) -> int:
     if args.output_bag is not None and Path(args.output_bag).exists():
         raise UsageError(f'--output-bag {args.output_bag}: exists already, not overwriting')
     cameras = cameras_from_args(args.camera)
+    offsets = camera_time_offsets(cameras, time_offsets_from_args(args.time_offset, cameras))
     options = {'method': args.method,
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap')}
@@ -202,6 +208,11 @@ def run(args) -> int:
             positions = read_positions(args.bag, GROUND_TRUTH_TOPIC)
             truth = _truth_arrays(positions)
             truth_name = f'{args.bag} {GROUND_TRUTH_TOPIC}'
+    if any(offsets.values()):
+        # One boundary: stamps go on the common clock before any method sees them.
+        observations = apply_time_offsets(observations, offsets)
+        notes.append('time offsets applied: ' + ', '.join(
+            f'{name} {value * 1e3:+.3f} ms' for name, value in offsets.items()))
     estimates = fuser.process(observations)
     result = None
     if truth is not None and (estimates or args.truth):
