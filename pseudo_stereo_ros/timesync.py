@@ -13,15 +13,11 @@
 # limitations under the License.
 
 """
-Per-camera time offsets: applying them, and estimating them from ball flights.
+Per-camera time offsets estimated from ball flights.
 
-**Convention.** A camera's offset ``o`` [s] is *added* to its stamps to put
-them on the rig's common shutter clock: ``true = stamp + o``.  A camera whose
-driver stamps frames 5 ms after the shutter has ``o = -0.005``.  Offsets are
-applied at one boundary, :func:`apply_time_offsets` (``track``, ``check``,
-``holdout``) or :func:`shift_observation` (the fuser node), before any
-method sees an observation; estimates are therefore stamped on the common
-clock, and the fusion methods need no change.
+A camera's offset ``o`` [s] is added to its stamps to put them on the rig's
+common shutter clock (``true = stamp + o``; see :mod:`pseudo_stereo_ros.offsets`,
+where they are applied).
 
 **Estimation** (``pseudo_stereo sync`` and the fuser node's online estimate).
 Only differences of offsets are observable, so each camera's offset is
@@ -66,29 +62,29 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 import math
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
-from scipy.stats import chi2
+from scipy.special import chdtrc
 
 from .camera import Camera
 from .errors import UsageError
 from .geometry import fundamental_matrix
+from .offsets import camera_time_offsets
 from .records import Observation
 from .stamps import NS_PER_S, seconds_to_ns
 
 __all__ = [
+    'DEFAULT_MAX_GAP_S',
+    'DEFAULT_MAX_UNCERTAINTY_S',
     'MIN_CROSSING',
     'MIN_SAMPLES',
     'OffsetEstimate',
     'OnlineOffsetEstimator',
     'PairOffset',
-    'apply_time_offsets',
-    'camera_time_offsets',
     'estimate_time_offsets',
-    'shift_observation',
 ]
 
 #: Fewest compared samples of a pair for an estimate (fewer: "too short").
@@ -105,54 +101,10 @@ _JACKKNIFE_BLOCKS = 8
 _MIN_SEGMENT = 4
 #: Smallest residual scale for the robust loss [px] (noise-free data has ~0).
 _MIN_SCALE_PX = 1e-3
+#: A detection this many robust scales off the cubic through its neighbours is a stray.
+_STRAY_SCALES = 5.0
 #: p-value below which pairwise differences that do not close are "confounded".
 _CLOSURE_P = 0.001
-
-
-# -- applying offsets ---------------------------------------------------------------------------
-
-def camera_time_offsets(cameras: Mapping[str, Camera] | Sequence[Camera],
-                        overrides: Optional[Mapping[str, float]] = None) -> Dict[str, float]:
-    """
-    Return each camera's time offset [s]: its calibration's ``time_offset_s``, or an override.
-
-    :param cameras: a :class:`~pseudo_stereo_ros.rig.Rig` (name -> camera) or cameras
-    :param overrides: name -> offset [s] that replace the calibration's value
-    :return: name -> offset [s], in the cameras' order
-    :raises UsageError: an override names an unknown camera or is not finite
-    """
-    if isinstance(cameras, Mapping):
-        cameras = list(cameras.values())
-    offsets = {camera.name: float(camera.calibration.time_offset_s) for camera in cameras}
-    for name, value in (overrides or {}).items():
-        if name not in offsets:
-            raise UsageError(f'time offset for unknown camera {name!r} '
-                             f'(cameras: {", ".join(offsets)})')
-        if isinstance(value, bool) or not math.isfinite(value):
-            raise UsageError(f'time offset of camera {name!r}: expected a finite number of '
-                             f'seconds, got {value!r}')
-        offsets[name] = float(value)
-    return offsets
-
-
-def shift_observation(observation: Observation, offset_ns: int) -> Observation:
-    """Return the observation with ``offset_ns`` added to its stamp (integer ns)."""
-    if not offset_ns:
-        return observation
-    return observation._replace(stamp_ns=observation.stamp_ns + int(offset_ns))
-
-
-def apply_time_offsets(observations: Iterable[Observation],
-                       offsets_s: Mapping[str, float]) -> List[Observation]:
-    """
-    Put observations on the common clock: add each camera's offset to its stamps.
-
-    :param observations: the observations (any cameras, any order)
-    :param offsets_s: camera name -> offset [s]; cameras not named keep their stamps
-    :return: the shifted observations, in the given order (stamps stay integer ns)
-    """
-    offsets_ns = {name: seconds_to_ns(value) for name, value in offsets_s.items()}
-    return [shift_observation(obs, offsets_ns.get(obs.camera, 0)) for obs in observations]
 
 
 # -- tracks -------------------------------------------------------------------------------------
@@ -231,8 +183,56 @@ def _ideal_track(camera: Camera, rows: Sequence[Tuple[int, float, float]], epoch
     ideal = camera.ideal_pixels(np.array([row[1:] for row in rows], dtype=float))
     keep = np.all(np.isfinite(ideal), axis=1)
     times = (stamps[keep] - np.int64(epoch_ns)).astype(float) / NS_PER_S
-    track = _Track(times, ideal[keep], max_gap_s)
+    ideal = ideal[keep]
+    keep = _without_strays(times, ideal, max_gap_s)
+    track = _Track(times[keep], ideal[keep], max_gap_s)
     return track if track.segments else None
+
+
+def _without_strays(times: np.ndarray, ideal: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """
+    Return a mask without stray detections: a spline through one would bend its neighbours.
+
+    Each detection is compared with the cubic through its two neighbours on
+    either side (leave one out); one that deviates by more than
+    :data:`_STRAY_SCALES` robust scales (and 0.5 px) and more than its
+    neighbours do is dropped, a few rounds (a stray also moves its
+    neighbours' predictions).  A bounce may lose its kink detection: harmless.
+    """
+    keep = np.ones(len(times), dtype=bool)
+    for _ in range(3):
+        index = np.nonzero(keep)[0]
+        if len(index) < 5:
+            break
+        t, p = times[index], ideal[index]
+        centre = np.arange(2, len(index) - 2)
+        neighbours = centre[:, None] + np.array([-2, -1, 1, 2])[None, :]
+        span = t[neighbours[:, -1]] - t[neighbours[:, 0]]
+        inside = span <= 2 * max_gap_s
+        weights = _lagrange_weights(t[centre], t[neighbours])
+        predicted = np.einsum('mk,mkj->mj', weights, p[neighbours])
+        deviation = np.full(len(index), 0.0)
+        deviation[centre] = np.where(inside, np.hypot(*(predicted - p[centre]).T), 0.0)
+        scale = 1.4826 * float(np.median(deviation[centre][inside])) if inside.any() else 0.0
+        threshold = max(_STRAY_SCALES * scale, 0.5)
+        peak = np.zeros(len(index), dtype=bool)
+        peak[centre] = ((deviation[centre] > threshold)
+                        & (deviation[centre] >= deviation[centre - 1])
+                        & (deviation[centre] >= deviation[centre + 1]))
+        if not peak.any():
+            break
+        keep[index[peak]] = False
+    return keep
+
+
+def _lagrange_weights(s: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Return (M, k) Lagrange weights at times (M,) for knot times (M, k)."""
+    weights = np.ones_like(knots)
+    for m in range(knots.shape[1]):
+        for n in range(knots.shape[1]):
+            if n != m:
+                weights[:, m] *= (s - knots[:, n]) / (knots[:, m] - knots[:, n])
+    return weights
 
 
 @dataclass
@@ -593,7 +593,7 @@ def _combine(names: List[str], given: Mapping[str, float],
     misfit = design[:, determined] @ solution - target
     chi_square = float(np.sum(weights * misfit ** 2))
     dof = len(usable) - len(determined)
-    closure_p = float(chi2.sf(chi_square, dof)) if dof > 0 else math.nan
+    closure_p = float(chdtrc(dof, chi_square)) if dof > 0 else math.nan
     if dof > 0 and chi_square > dof:  # Birge ratio: inconsistent pairs widen the uncertainty
         covariance = covariance * chi_square / dof
     for column, k in enumerate(determined):
@@ -639,15 +639,22 @@ class OnlineOffsetEstimator:
         self.latest: Optional[OffsetEstimate] = None
 
     def add(self, observation: Observation) -> None:
-        """Store one raw observation (unknown cameras and non-finite pixels are ignored)."""
+        """
+        Store one raw observation.
+
+        Unknown cameras, non-finite pixels and a camera's duplicate or
+        out-of-order stamps are ignored; stamps that jump back by more than the
+        window (a replay looping, a restarted clock) start the window afresh.
+        """
         samples = self._samples.get(observation.camera)
         if samples is None or not (math.isfinite(observation.u) and math.isfinite(observation.v)):
             return
-        if samples and observation.stamp_ns <= samples[-1][0]:
-            if samples[-1][0] - observation.stamp_ns > self.window_ns:
-                samples.clear()  # the clock jumped back (a replay looping): start over
-            else:
-                return
+        newest = max((s[-1][0] for s in self._samples.values() if s), default=None)
+        if newest is not None and newest - observation.stamp_ns > self.window_ns:
+            for old in self._samples.values():  # the clock jumped back (a replay looping)
+                old.clear()
+        elif samples and observation.stamp_ns <= samples[-1][0]:
+            return  # a duplicate or out-of-order point of this camera
         samples.append((int(observation.stamp_ns), float(observation.u), float(observation.v)))
 
     def _prune(self) -> None:

@@ -65,9 +65,9 @@ from ..calibration import CameraCalibration
 from ..camera import Camera
 from ..errors import UsageError
 from ..evaluation.holdout import oracle_at
+from ..offsets import apply_time_offsets, camera_time_offsets
 from ..records import Observation
 from ..stamps import NS_PER_S, seconds_to_ns
-from ..timesync import apply_time_offsets, camera_time_offsets
 
 __all__ = [
     'CameraRefinement',
@@ -97,6 +97,8 @@ _MIN_SCALE_PX = 0.05
 _OUTLIER_SCALES = 4.0
 # Most solve / re-assign / reject rounds.
 _MAX_ROUNDS = 6
+# Flights leaving a parameter this many times its bound undetermined are refused at once.
+_EARLY_FACTOR = 10.0
 # Most function evaluations of one solve.
 _MAX_EVALUATIONS = 100
 # Most Gauss-Newton steps of the ball positions for given camera parameters, and the
@@ -967,6 +969,21 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     n_point = 3 * problem.n_points
     x = _Solver(problem, x, problem.scale(x)).solve_points(x[n_point:])[0]
     before = problem.per_camera(x)
+    sigma_px = _detection_noise(problem)
+    bounds = {'min_flights': min_flights, 'max_sigma_deg': max_sigma_deg,
+              'max_sigma_m': max_sigma_m, 'max_sigma_s': max_sigma_s,
+              'max_sigma_focal': max_sigma_focal}
+
+    # Flights that leave a parameter undetermined by far (ten times its bound, judged at the
+    # given calibration: the geometry, not the error, decides) are refused without a search
+    # through the flat directions of the cost.
+    covariance = _camera_covariance(
+        _Solver(problem, x, problem.scale(x)).jac(x[n_point:]), sigma_px)
+    early = _report(problem, x, before, before, covariance, sigma_px, converged=True,
+                    early=True, **{key: value * (_EARLY_FACTOR if key.startswith('max') else 1)
+                                   for key, value in bounds.items()})
+    if any('not determined' in reason for reason in early.refusals):
+        return early
 
     result = None
     for _ in range(_MAX_ROUNDS):
@@ -982,29 +999,26 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
                     and np.array_equal(knots, b.knots)))
                for (knots, used), b in zip(previous, problem.blocks)):
             break
-    x, result = _Solver(problem, x, problem.scale(x)).run()
+    else:
+        x, result = _Solver(problem, x, problem.scale(x)).run()
     after = problem.per_camera(x)
-    sigma_px = _detection_noise(problem)
-    solver = _Solver(problem, x, problem.scale(x))
-    covariance = _camera_covariance(solver.jac(x[n_point:]), sigma_px)
-    return _report(problem, x, before, after, covariance, result, sigma_px,
-                   min_flights=min_flights, max_sigma_deg=max_sigma_deg,
-                   max_sigma_m=max_sigma_m, max_sigma_s=max_sigma_s,
-                   max_sigma_focal=max_sigma_focal)
+    covariance = _camera_covariance(
+        _Solver(problem, x, problem.scale(x)).jac(x[n_point:]), sigma_px)
+    return _report(problem, x, before, after, covariance, sigma_px,
+                   converged=result.status > 0, message=result.message, **bounds)
 
 
-def _report(problem: _Problem, x, before, after, covariance, result, scale, *,
-            min_flights, max_sigma_deg, max_sigma_m, max_sigma_s,
-            max_sigma_focal) -> RefineResult:
+def _report(problem: _Problem, x, before, after, covariance, scale, *, converged: bool,
+            message: str = '', early: bool = False, min_flights, max_sigma_deg, max_sigma_m,
+            max_sigma_s, max_sigma_focal) -> RefineResult:
     n_point = 3 * problem.n_points
     flights = sum(len(f.first) for f in problem.flights)
     refusals, notes = [], []
     if flights < min_flights:
         refusals.append(f'too few flights: {flights} (need {min_flights}; a flight is a run '
                         f'of {problem.cameras[0].name} detections without a gap over max_gap)')
-    if result is None or result.status <= 0:
-        refusals.append('the solver did not converge: '
-                        + (result.message if result is not None else 'no solve'))
+    if not converged:
+        refusals.append(f'the solver did not converge: {message}')
     calibrations, reports = {}, []
     for k, camera in enumerate(problem.cameras):
         parts = problem.slices[k]
@@ -1042,9 +1056,12 @@ def _report(problem: _Problem, x, before, after, covariance, result, scale, *,
                 ('focal length', sigma_focal, max_sigma_focal, '(relative)'),
                 ('time offset', sigma_offset, max_sigma_s, 's')):
             if not value <= bound:
+                judged = (f'{_EARLY_FACTOR:g} x the bound, judged before refining: '
+                          if early else '')
                 refusals.append(f'{camera.name}: {label} not determined by these flights: '
-                                f'1 sigma {value:.3g} {unit} > {bound:g} {unit} (degenerate '
-                                'motion: add flights in other directions and places)')
+                                f'1 sigma {value:.3g} {unit} > {judged}{bound:g} {unit} '
+                                '(degenerate motion: add flights in other directions and '
+                                'places)')
         if correlation > CONFOUNDED_CORRELATION:
             notes.append(f'{camera.name}: time offset and pose are confounded (correlation '
                          f'{correlation:.2f}): the flights barely tell a time shift from a '

@@ -28,7 +28,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..calibrate import epipolar_check
 from ..formats.csv_io import read_observations
-from ..timesync import apply_time_offsets, camera_time_offsets
+from ..offsets import apply_time_offsets, camera_time_offsets
 
 __all__ = ['BAD_MEDIAN_PX', 'GOOD_MEDIAN_PX', 'HELP', 'NAME', 'add_arguments', 'run',
            'verdict']

@@ -31,7 +31,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..evaluation.holdout import holdout, HOLDOUT_METHODS
 from ..formats.bagio import read_observations
-from ..timesync import apply_time_offsets, camera_time_offsets
+from ..offsets import apply_time_offsets, camera_time_offsets
 
 NAME = 'holdout'
 HELP = ('run two cameras of a bag through each method and score the estimates by reprojection '

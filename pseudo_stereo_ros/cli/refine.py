@@ -39,7 +39,7 @@ from ..calibrate.refine import (DEFAULT_MAX_SIGMA_DEG, DEFAULT_MAX_SIGMA_FOCAL,
 from ..calibration import save_calibration
 from ..camera import Camera
 from ..errors import CalibrationFitError
-from ..timesync import camera_time_offsets
+from ..offsets import camera_time_offsets
 
 __all__ = ['HELP', 'NAME', 'add_arguments', 'run']
 

@@ -42,8 +42,8 @@ from ..formats.bagio import (bag_topics, BagError, GROUND_TRUTH_TOPIC, image_poi
                              read_positions, write_estimates as write_bag_estimates)
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..fusion import DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, Fuser, METHODS
+from ..offsets import apply_time_offsets, camera_time_offsets
 from ..records import Observation
-from ..timesync import apply_time_offsets, camera_time_offsets
 
 NAME = 'track'
 HELP = ('run the fuser offline on observations (stamp_ns,camera,u,v CSV, or image points or '

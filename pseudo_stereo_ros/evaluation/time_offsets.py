@@ -25,17 +25,20 @@ on the common (true) clock.  ROS-free.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Dict, List, Mapping, Optional, Sequence
 
+import cv2
 import numpy as np
 
+from ..calibration import CameraCalibration
 from ..camera import Camera
 from ..records import Observation
 from ..sim.scenarios import DEFAULT_EPOCH_NS, make_scenario, observe, shutter_stamps
 from ..stamps import seconds_to_ns
 
-__all__ = ['FlightRecording', 'simulate_flights', 'truth_at_stamps']
+__all__ = ['FlightRecording', 'event_errors_mm', 'perturbed_calibration', 'simulate_flights',
+           'truth_at_stamps']
 
 
 @dataclass(frozen=True)
@@ -126,3 +129,48 @@ def truth_at_stamps(recording: FlightRecording, stamps_ns: np.ndarray) -> np.nda
     points = np.full((len(stamps_ns), 3), np.nan)
     points[found] = recording.truth_points[index[found]]
     return points
+
+
+def event_errors_mm(recording: FlightRecording, estimates: Sequence,
+                    applied_offsets_s: Mapping[str, float]) -> np.ndarray:
+    """
+    Return the 3D errors [mm] of estimates against the truth at their events' true times.
+
+    An estimate belongs to a shutter event of ``estimate.camera``; its stamp is
+    that camera's raw stamp plus the offset that was applied.  The true time of
+    the event is the raw stamp plus the camera's true offset, so estimates are
+    scored against the right instant whatever offsets (none, estimated, true)
+    were applied.
+
+    :param recording: the simulated recording (true offsets and truth)
+    :param estimates: the fuser's estimates
+    :param applied_offsets_s: camera -> the offset [s] that was added to its stamps
+    :return: (N,) distances [mm] (estimates without a truth sample left out)
+    """
+    stamps = np.array([e.stamp_ns - seconds_to_ns(applied_offsets_s.get(e.camera, 0.0))
+                       + seconds_to_ns(recording.offsets_s.get(e.camera, 0.0))
+                       for e in estimates], dtype=np.int64)
+    truth = truth_at_stamps(recording, stamps)
+    points = np.array([(e.x, e.y, e.z) for e in estimates], dtype=float).reshape(-1, 3)
+    found = np.all(np.isfinite(truth), axis=1)
+    return 1e3 * np.linalg.norm(points[found] - truth[found], axis=1)
+
+
+def perturbed_calibration(calibration: CameraCalibration, *, degrees: float, metres: float,
+                          seed: int = 0) -> CameraCalibration:
+    """
+    Return a calibration rotated by ``degrees`` about a random axis and moved ``metres``.
+
+    :param calibration: the true calibration
+    :param degrees: rotation angle [deg] (about a random axis through the optical centre)
+    :param metres: distance the optical centre moves, in a random direction [m]
+    :param seed: random seed of the axis and the direction
+    """
+    rng = np.random.default_rng(seed)
+    axis = rng.normal(size=3)
+    direction = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    direction /= np.linalg.norm(direction)
+    rotation = cv2.Rodrigues(axis * np.radians(degrees))[0] @ calibration.rotation
+    centre = calibration.center + metres * direction
+    return replace(calibration, rotation=rotation, translation=-rotation @ centre)

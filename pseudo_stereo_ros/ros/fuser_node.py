@@ -52,10 +52,11 @@ from .messages import (diagnostic_array, diagnostic_status, estimate_to_point,
 from .node_tools import declare, load_cameras, run_node, StartupError
 from ..errors import PseudoStereoError
 from ..fusion import DROP_REASONS, Fuser, METHODS
+from ..offsets import camera_time_offsets, shift_observation
 from ..records import Observation
 from ..reorder import ReorderBuffer
 from ..stamps import seconds_to_ns
-from ..timesync import camera_time_offsets, OnlineOffsetEstimator, shift_observation
+from ..timesync import OnlineOffsetEstimator
 
 __all__ = ['FuserNode', 'main']
 
