@@ -203,7 +203,8 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(files, capsys, tmp_pat
 def test_track_rejects_a_bad_time_offset(files, capsys, tmp_path):
     paths, obs = files
     for value, message in (('camera2', 'expected NAME=SECONDS'), ('camera2=x', 'NAME=SECONDS'),
-                           ('camera2=nan', 'NAME=SECONDS'), ('camera7=0.1', "no camera 'camera7'")):
+                           ('camera2=nan', 'NAME=SECONDS'),
+                           ('camera7=0.1', "no camera 'camera7'")):
         assert main(['track', *_camera_args(paths), '--input', str(obs), '--output',
                      str(tmp_path / 'e.csv'), '--time-offset', value]) == 2
         err = capsys.readouterr().err

@@ -23,9 +23,9 @@ give ~0.1 ms.  A ball moving parallel to the baseline moves along the epipolar l
 offset is observable.
 """
 
+from dataclasses import replace
 import math
 
-from dataclasses import replace
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.errors import UsageError
