@@ -62,6 +62,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 import math
+import threading
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -103,6 +104,8 @@ _MIN_SEGMENT = 4
 _MIN_SCALE_PX = 1e-3
 #: A detection this many robust scales off the cubic through its neighbours is a stray.
 _STRAY_SCALES = 5.0
+#: Half width of the online search once every camera has a usable estimate [s].
+_ONLINE_HALF_WIDTH_S = 0.002
 #: p-value below which pairwise differences that do not close are "confounded".
 _CLOSURE_P = 0.001
 
@@ -353,7 +356,8 @@ def estimate_pair_offset(camera_a: Camera, camera_b: Camera,
                          tracks: Sequence[Tuple[Optional[_Track], Optional[_Track]]], *,
                          center_s: float = 0.0, search_s: float = 0.0,
                          max_uncertainty_s: float = DEFAULT_MAX_UNCERTAINTY_S,
-                         jackknife: bool = True) -> Optional[PairOffset]:
+                         jackknife: bool = True,
+                         half_width_s: Optional[float] = None) -> Optional[PairOffset]:
     """
     Estimate ``o_b - o_a`` for one pair from its tracks (see the module rules).
 
@@ -364,13 +368,15 @@ def estimate_pair_offset(camera_a: Camera, camera_b: Camera,
     :param search_s: search at least this far either side [s] (default: one frame period)
     :param max_uncertainty_s: a larger 1 sigma is "unobservable" [s]
     :param jackknife: include the block jackknife in the uncertainty
+    :param half_width_s: search exactly this far either side (default: the larger of one
+        frame period and ``search_s``)
     :return: the estimate, or None when the pair has no detections in common
     """
     problem = _PairProblem(camera_a, camera_b, tracks)
     if not problem.directions or not math.isfinite(problem.period):
         return None
-    half = max(problem.period, float(search_s))
-    step = problem.period / 12.0
+    half = max(problem.period, float(search_s)) if half_width_s is None else half_width_s
+    step = min(problem.period / 12.0, half / 2.0)
     grid = center_s + np.arange(-half, half + 0.5 * step, step)
     medians, counts = [], []
     for d in grid:
@@ -489,7 +495,8 @@ def estimate_time_offsets(cameras: Mapping[str, Camera] | Sequence[Camera],
                           offsets_s: Optional[Mapping[str, float]] = None,
                           search_s: float = 0.0, max_gap_s: float = DEFAULT_MAX_GAP_S,
                           max_uncertainty_s: float = DEFAULT_MAX_UNCERTAINTY_S,
-                          all_pairs: bool = True, jackknife: bool = True) -> OffsetEstimate:
+                          all_pairs: bool = True, jackknife: bool = True,
+                          half_width_s: Optional[float] = None) -> OffsetEstimate:
     """
     Estimate every camera's time offset relative to the first from recorded flights.
 
@@ -502,6 +509,8 @@ def estimate_time_offsets(cameras: Mapping[str, Camera] | Sequence[Camera],
     :param max_uncertainty_s: a larger 1 sigma is reported as unobservable [s]
     :param all_pairs: use every pair (closure check with 3+ cameras), not only the reference's
     :param jackknife: include the block jackknife in the uncertainties (slower)
+    :param half_width_s: search exactly this far either side of the given offsets [s]
+        (default: the larger of one frame period and ``search_s``)
     :return: the estimate
     """
     cameras = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
@@ -516,7 +525,8 @@ def estimate_time_offsets(cameras: Mapping[str, Camera] | Sequence[Camera],
         result = estimate_pair_offset(
             a, b, [(t[a.name], t[b.name]) for t in tracks],
             center_s=given[b.name] - given[a.name], search_s=search_s,
-            max_uncertainty_s=max_uncertainty_s, jackknife=jackknife)
+            max_uncertainty_s=max_uncertainty_s, jackknife=jackknife,
+            half_width_s=half_width_s)
         if result is not None:
             pairs.append(result)
     offsets, sigmas, closure_p = _combine(names, given, pairs)
@@ -613,7 +623,8 @@ class OnlineOffsetEstimator:
     per camera) and runs :func:`estimate_time_offsets` on them (pairs with the
     reference camera only, to bound the work per update).  Each update
     searches around the previous estimate, so a slowly drifting offset is
-    followed.
+    followed.  :meth:`add` and :meth:`update` may run in different threads
+    (the fuser node estimates in a worker thread, so fusion never waits).
 
     :param cameras: the cameras in order; the first is the reference
     :param offsets_s: the configured offsets [s] (the reference keeps its own)
@@ -623,7 +634,7 @@ class OnlineOffsetEstimator:
     """
 
     def __init__(self, cameras: Sequence[Camera], offsets_s: Mapping[str, float], *,
-                 window_s: float = 10.0, max_samples: int = 3000,
+                 window_s: float = 10.0, max_samples: int = 1000,
                  max_uncertainty_s: float = DEFAULT_MAX_UNCERTAINTY_S,
                  max_gap_s: float = DEFAULT_MAX_GAP_S):
         if not (window_s > 0 and math.isfinite(window_s)):
@@ -635,6 +646,10 @@ class OnlineOffsetEstimator:
         self._given = camera_time_offsets(self.cameras, offsets_s)
         self._samples = {camera.name: deque(maxlen=int(max_samples)) for camera in self.cameras}
         self._center = dict(self._given)
+        self._settled = False
+        self._lock = threading.Lock()
+        #: Observations stored since the last update.
+        self.added = 0
         #: The newest :class:`OffsetEstimate` (None before the first update with data).
         self.latest: Optional[OffsetEstimate] = None
 
@@ -649,13 +664,16 @@ class OnlineOffsetEstimator:
         samples = self._samples.get(observation.camera)
         if samples is None or not (math.isfinite(observation.u) and math.isfinite(observation.v)):
             return
-        newest = max((s[-1][0] for s in self._samples.values() if s), default=None)
-        if newest is not None and newest - observation.stamp_ns > self.window_ns:
-            for old in self._samples.values():  # the clock jumped back (a replay looping)
-                old.clear()
-        elif samples and observation.stamp_ns <= samples[-1][0]:
-            return  # a duplicate or out-of-order point of this camera
-        samples.append((int(observation.stamp_ns), float(observation.u), float(observation.v)))
+        with self._lock:
+            newest = max((s[-1][0] for s in self._samples.values() if s), default=None)
+            if newest is not None and newest - observation.stamp_ns > self.window_ns:
+                for old in self._samples.values():  # the clock jumped back (a replay looping)
+                    old.clear()
+            elif samples and observation.stamp_ns <= samples[-1][0]:
+                return  # a duplicate or out-of-order point of this camera
+            samples.append((int(observation.stamp_ns), float(observation.u),
+                            float(observation.v)))
+            self.added += 1
 
     def _prune(self) -> None:
         newest = max((s[-1][0] for s in self._samples.values() if s), default=None)
@@ -667,18 +685,26 @@ class OnlineOffsetEstimator:
 
     def update(self) -> Optional[OffsetEstimate]:
         """Estimate from the window; return it (also in :attr:`latest`), or None without data."""
-        self._prune()
-        observations = [Observation(name, *row) for name, rows in self._samples.items()
-                        for row in rows]
+        with self._lock:
+            self._prune()
+            observations = [Observation(name, *row) for name, rows in self._samples.items()
+                            for row in rows]
+            self.added = 0
         if not observations:
             return None
+        # Once every camera has a usable estimate, search only near it (a drift is followed,
+        # a jump of more than the half width is not: it needs a restart).  The jackknife is left
+        # out to bound the work per update; the uncertainty is the noise value alone.
+        narrow = self._settled and _ONLINE_HALF_WIDTH_S or None
         estimate = estimate_time_offsets(
             self.cameras, [observations], offsets_s=self._center, max_gap_s=self.max_gap_s,
-            max_uncertainty_s=self.max_uncertainty_s, all_pairs=False)
+            max_uncertainty_s=self.max_uncertainty_s, all_pairs=False, jackknife=False,
+            half_width_s=narrow)
         self.latest = estimate
         for name in self._center:
             if name != estimate.reference and self.usable(name):
                 self._center[name] = estimate.offsets_s[name]
+        self._settled = all(self.usable(camera.name) for camera in self.cameras[1:])
         return estimate
 
     def usable(self, name: str) -> bool:

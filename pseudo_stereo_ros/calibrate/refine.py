@@ -107,6 +107,8 @@ _POINT_ITERATIONS = 20
 _POINT_TOLERANCE = 1e-9
 # Initial Marquardt damping of those steps.
 _POINT_DAMPING = 1e-3
+# One sigma of the baseline's length with keep_world [m]: held, as in the default gauge.
+_BASELINE_SIGMA_M = 1e-4
 # Jerk [m/s^3] that one sigma of the smoothness rows allows: loose (a 3 m/s spiral of radius
 # 0.62 m has 70; drag and spin far less), so that the rows only remove the null modes; a
 # bounce is an outlier the loss absorbs.  1e3 biased the simulated bounces at 168 fps.
@@ -405,6 +407,9 @@ class _Problem:
                                               pixels))
         self.n_points = count
         self.points0 = np.vstack(points0) if points0 else np.zeros((0, 3))
+        #: Rows of the keep_world priors at the end of the residuals (6 per camera and the
+        #: baseline's length, or none).
+        self.prior_rows = 6 * len(self.cameras) + 1 if keep_world else 0
         self._smoothness()
         self._layout(focal, estimate_offsets, keep_world, baseline_m)
 
@@ -477,12 +482,12 @@ class _Problem:
             if estimate_offsets and k > 0:
                 take('offset', 1)
             self.slices.append(parts)
-        if not keep_world and len(self.cameras) > 1:
-            axis = self.cameras[1].center - ref_centre
-            length = float(np.linalg.norm(axis))
-            if not length > 0:
-                raise UsageError('the first two cameras share an optical centre: no baseline')
-            self.baseline = float(baseline_m) if baseline_m is not None else length
+        axis = self.cameras[1].center - ref_centre
+        length = float(np.linalg.norm(axis))
+        if not length > 0:
+            raise UsageError('the first two cameras share an optical centre: no baseline')
+        self.baseline = float(baseline_m) if baseline_m is not None else length
+        if not keep_world:
             self.axis = axis / length
             helper = np.eye(3)[int(np.argmin(np.abs(self.axis)))]
             self.e1 = np.cross(self.axis, helper)
@@ -622,6 +627,20 @@ class _Problem:
                         derivative[np.arange(3), columns] = scale_px / sigma
                         camera_rows.append(derivative)
                     row += 3
+            # The scale: flights cannot give it, and the smoothness rows would shrink the rig.
+            first, second = self.slices[0]['centre'], self.slices[1]['centre']
+            axis = x[second] - x[first]
+            length = float(np.linalg.norm(axis))
+            parts.append(np.array([scale_px * (length - self.baseline) / _BASELINE_SIGMA_M]))
+            if jacobian and cameras:
+                derivative = np.zeros((1, n_theta))
+                unit = scale_px / _BASELINE_SIGMA_M * axis / length
+                derivative[0, second.start - 3 * self.n_points:second.stop
+                           - 3 * self.n_points] = unit
+                derivative[0, first.start - 3 * self.n_points:first.stop
+                           - 3 * self.n_points] = -unit
+                camera_rows.append(derivative)
+            row += 1
         residuals = np.concatenate(parts) if parts else np.zeros(0)
         if not jacobian:
             return residuals
@@ -849,6 +868,22 @@ class _Solver:
         self._cache = {key: (x, linear)}
         return x, linear
 
+    def _loss(self, z: np.ndarray) -> np.ndarray:
+        """
+        Return soft-L1 (rho, rho', rho'') of z = (r / scale)^2, quadratic for the priors.
+
+        The priors of ``keep_world`` (the last rows) must hold whatever the
+        residuals do: under a robust loss a large pull would switch them off.
+        """
+        root = np.sqrt(1.0 + z)
+        rho = np.array((2.0 * (root - 1.0), 1.0 / root, -0.5 / root ** 3))
+        priors = self.problem.prior_rows
+        if priors:
+            rho[0, -priors:] = z[-priors:]
+            rho[1, -priors:] = 1.0
+            rho[2, -priors:] = 0.0
+        return rho
+
     def fun(self, theta: np.ndarray) -> np.ndarray:
         """Return the residuals at the best positions for theta."""
         return self.solve_points(theta)[1].residuals
@@ -864,7 +899,7 @@ class _Solver:
     def run(self) -> Tuple[np.ndarray, object]:
         """Solve; return the full parameter vector and scipy's result."""
         theta0 = self.x[self.n_point:]
-        result = least_squares(self.fun, theta0, jac=self.jac, method='trf', loss='soft_l1',
+        result = least_squares(self.fun, theta0, jac=self.jac, method='trf', loss=self._loss,
                                f_scale=self.scale_px, x_scale='jac', xtol=1e-8, ftol=1e-8,
                                gtol=1e-8, max_nfev=_MAX_EVALUATIONS)
         x = self.solve_points(result.x)[0]
@@ -899,6 +934,36 @@ def _detection_noise(problem: _Problem) -> float:
     if not len(values):
         return _MIN_SCALE_PX
     return max(1.4826 * float(np.median(np.abs(values))) / math.sqrt(20.0), _MIN_SCALE_PX)
+
+
+def _relative_covariance(problem: _Problem, x: np.ndarray, sigma_px: float) -> np.ndarray:
+    """
+    Return the covariance of the camera parameters that the flights must determine.
+
+    In the default gauge that is all of them.  With ``keep_world`` the priors,
+    not the flights, place the rig in the world (a rig moved as a whole
+    explains the flights as well), so the uncertainty is judged for the rig's
+    relative geometry: the first camera's pose and the baseline's length held,
+    the priors left out.  The first camera's rotation and centre then get 0.
+    """
+    jacobian = _Solver(problem, x, problem.scale(x)).jac(x[3 * problem.n_points:])
+    if not problem.keep_world:
+        return _camera_covariance(jacobian, sigma_px)
+    first = 3 * problem.n_points
+    data = jacobian[:len(jacobian) - problem.prior_rows]
+    held = [c - first for name in ('rotation', 'centre')
+            for c in range(problem.slices[0][name].start, problem.slices[0][name].stop)]
+    free = [c for c in range(jacobian.shape[1]) if c not in held]
+    centre = problem.slices[1]['centre']
+    axis = problem.camera_state(x, 1)[1] - problem.camera_state(x, 0)[1]
+    length_row = np.zeros((1, jacobian.shape[1]))
+    length_row[0, centre.start - first:centre.stop - first] = axis / np.linalg.norm(axis)
+    # The baseline's length held: a row far stronger than the data.
+    weight = 1e6 * max(float(np.abs(data).max(initial=0.0)), 1.0)
+    reduced = np.vstack((data, weight * length_row))[:, free]
+    covariance = np.zeros((jacobian.shape[1], jacobian.shape[1]))
+    covariance[np.ix_(free, free)] = _camera_covariance(reduced, sigma_px)
+    return covariance
 
 
 def _camera_covariance(jacobian: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -977,8 +1042,7 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     # Flights that leave a parameter undetermined by far (ten times its bound, judged at the
     # given calibration: the geometry, not the error, decides) are refused without a search
     # through the flat directions of the cost.
-    covariance = _camera_covariance(
-        _Solver(problem, x, problem.scale(x)).jac(x[n_point:]), sigma_px)
+    covariance = _relative_covariance(problem, x, sigma_px)
     early = _report(problem, x, before, before, covariance, sigma_px, converged=True,
                     early=True, **{key: value * (_EARLY_FACTOR if key.startswith('max') else 1)
                                    for key, value in bounds.items()})
@@ -1002,8 +1066,7 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     else:
         x, result = _Solver(problem, x, problem.scale(x)).run()
     after = problem.per_camera(x)
-    covariance = _camera_covariance(
-        _Solver(problem, x, problem.scale(x)).jac(x[n_point:]), sigma_px)
+    covariance = _relative_covariance(problem, x, sigma_px)
     return _report(problem, x, before, after, covariance, sigma_px,
                    converged=result.status > 0, message=result.message, **bounds)
 
@@ -1019,6 +1082,11 @@ def _report(problem: _Problem, x, before, after, covariance, scale, *, converged
                         f'of {problem.cameras[0].name} detections without a gap over max_gap)')
     if not converged:
         refusals.append(f'the solver did not converge: {message}')
+    pooled_before = np.concatenate([v for v in before.values()]) if before else np.zeros(0)
+    pooled_after = np.concatenate([v for v in after.values()]) if after else np.zeros(0)
+    if len(pooled_after) and not np.median(pooled_after) <= np.median(pooled_before):
+        refusals.append(f'the refined calibration reprojects worse than the given one (median '
+                        f'{np.median(pooled_after):.3g} px > {np.median(pooled_before):.3g} px)')
     calibrations, reports = {}, []
     for k, camera in enumerate(problem.cameras):
         parts = problem.slices[k]

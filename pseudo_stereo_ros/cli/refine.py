@@ -71,7 +71,7 @@ def add_arguments(parser) -> None:
                              '%(default)s)')
     parser.add_argument('--baseline', type=float, default=None, metavar='M',
                         help="the measured distance between the first two cameras' optical "
-                             "centres (default: the given calibrations')")
+                             "centres, which sets the scale (default: the given calibrations')")
     parser.add_argument('--max-gap-s', type=float, default=0.1, metavar='S',
                         help='a gap over this ends a flight [s] (default: %(default)s)')
     parser.add_argument('--min-flights', type=int, default=DEFAULT_MIN_FLIGHTS, metavar='N',
@@ -126,9 +126,6 @@ def run(args) -> int:
         _positive(getattr(args, option), '--' + option.replace('_', '-'))
     if args.baseline is not None:
         _positive(args.baseline, '--baseline')
-    if args.baseline is not None and args.keep_world:
-        raise UsageError('--baseline: the scale comes from the priors with --keep-world; '
-                         'give one or the other')
     if args.min_flights < 1:
         raise UsageError(f'--min-flights: expected at least 1, got {args.min_flights}')
     cameras = cameras_from_args(args.camera)

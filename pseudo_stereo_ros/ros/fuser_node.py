@@ -40,6 +40,7 @@ stamps, so a camera's shifted stamps never go back and never jump.
 
 from collections import Counter, deque
 import functools
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -136,6 +137,7 @@ class FuserNode(Node):
         self._target_ns = dict(self._applied_ns)
         self._last_raw_ns = {}
         self.offset_estimator = None
+        self._worker = None
         if offset_period_s > 0:
             self.offset_estimator = OnlineOffsetEstimator(self.cameras, self.offsets_s,
                                                           window_s=offset_window_s)
@@ -223,14 +225,26 @@ class FuserNode(Node):
         return shift_observation(observation, applied)
 
     def _estimate_offsets(self) -> None:
-        estimate = self.offset_estimator.update()
-        if estimate is None or not self.apply_estimates:
+        """Take the finished estimate, start the next one (in a worker: fusion never waits)."""
+        if self._worker is not None and self._worker.is_alive():
             return
-        for name in self._names[1:]:
-            if self.offset_estimator.usable(name):
-                self._target_ns[name] = seconds_to_ns(estimate.offsets_s[name])
-        self._window_ns = self._base_window_ns + self._offset_spread_ns()
-        self.buffer.window_ns = self._window_ns
+        estimate = self.offset_estimator.latest
+        if estimate is not None and self.apply_estimates:
+            for name in self._names[1:]:
+                if self.offset_estimator.usable(name):
+                    self._target_ns[name] = seconds_to_ns(estimate.offsets_s[name])
+            self._window_ns = self._base_window_ns + self._offset_spread_ns()
+            self.buffer.window_ns = self._window_ns
+        if self.offset_estimator.added:
+            self._worker = threading.Thread(target=self.offset_estimator.update,
+                                            name='time offsets', daemon=True)
+            self._worker.start()
+
+    def destroy_node(self):
+        """Wait for a running offset estimate, then destroy the node."""
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+        return super().destroy_node()
 
     def _on_point(self, name: str, msg: PointStamped) -> None:
         start = time.perf_counter()
