@@ -1082,8 +1082,8 @@ def _report(problem: _Problem, x, before, after, covariance, scale, *, converged
                         f'of {problem.cameras[0].name} detections without a gap over max_gap)')
     if not converged:
         refusals.append(f'the solver did not converge: {message}')
-    pooled_before = np.concatenate([v for v in before.values()]) if before else np.zeros(0)
-    pooled_after = np.concatenate([v for v in after.values()]) if after else np.zeros(0)
+    pooled_before = np.concatenate(list(before.values())) if before else np.zeros(0)
+    pooled_after = np.concatenate(list(after.values())) if after else np.zeros(0)
     if len(pooled_after) and not np.median(pooled_after) <= np.median(pooled_before):
         refusals.append(f'the refined calibration reprojects worse than the given one (median '
                         f'{np.median(pooled_after):.3g} px > {np.median(pooled_before):.3g} px)')
