@@ -29,11 +29,18 @@ shared ``_matrix``); a new key gets its own.  Every error is one
 :class:`CalibrationError` line naming the file, the key (or the line and
 column of bad YAML) and the reason; non-finite numbers are refused in
 every numeric field.
+The optional ``time_offset_s`` (default 0) is added to the camera's stamps to
+put them on the rig's common shutter clock (see
+:mod:`pseudo_stereo_ros.timesync`); :func:`write_time_offsets` updates only
+that key of existing files.
 """
 
 from dataclasses import dataclass
 import math
 import os
+import re
+import shutil
+import tempfile
 from typing import Any, Mapping, Optional, Tuple, Union
 
 import numpy as np
@@ -51,6 +58,7 @@ __all__ = [
     'load_calibration',
     'load_camera_info',
     'save_calibration',
+    'write_time_offsets',
 ]
 
 #: Distortion model name -> allowed numbers of coefficients (OpenCV order).
@@ -81,6 +89,8 @@ class CameraCalibration:
     ``camera_matrix`` is K (3, 3) in pixels, ``dist_coeffs`` D (k,) in OpenCV
     order for ``distortion_model``, ``rotation`` R (3, 3) and ``translation``
     t (3,) [m] map world to camera coordinates: ``x_cam = R @ x_world + t``.
+    ``time_offset_s`` [s] is added to the camera's stamps to put them on the
+    common shutter clock (a camera that stamps its frames 5 ms late has -0.005).
     """
 
     camera_name: str
@@ -91,6 +101,7 @@ class CameraCalibration:
     dist_coeffs: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
+    time_offset_s: float = 0.0
 
     @property
     def center(self) -> np.ndarray:
@@ -255,6 +266,15 @@ def _rotation(data: Mapping[str, Any], source: str) -> np.ndarray:
     return rotation
 
 
+def _time_offset(data: Mapping[str, Any], source: str) -> float:
+    """Read the optional ``time_offset_s`` [s] (0 when absent)."""
+    value = data.get('time_offset_s', 0.0)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value):
+        raise _fail(source, 'time_offset_s', f'expected a finite number of seconds, got {value!r}')
+    return float(value)
+
+
 def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
                           raw_name: str = None) -> CameraCalibration:
     """
@@ -277,12 +297,14 @@ def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
     model, dist_coeffs = _distortion(data, source)
     rotation = _rotation(data, source)
     translation = _matrix(data, 'translation', (3,), source)
+    time_offset_s = _time_offset(data, source)
+
     for array in (camera_matrix, dist_coeffs, rotation, translation):
         array.setflags(write=False)
     return CameraCalibration(
         camera_name=name, image_width=width, image_height=height,
         camera_matrix=camera_matrix, distortion_model=model, dist_coeffs=dist_coeffs,
-        rotation=rotation, translation=translation)
+        rotation=rotation, translation=translation, time_offset_s=time_offset_s)
 
 
 def load_calibration(path: PathLike) -> CameraCalibration:
@@ -335,6 +357,7 @@ def calibration_to_dict(calibration: CameraCalibration) -> dict:
         'projection_matrix': _yaml_matrix(projection),
         'rotation_matrix': _yaml_matrix(calibration.rotation),
         'translation': [float(x) for x in calibration.translation],
+        'time_offset_s': float(calibration.time_offset_s),
     }
 
 
@@ -347,7 +370,7 @@ def save_calibration(calibration: CameraCalibration, path: PathLike) -> None:
     """
     data = calibration_to_dict(calibration)
     for value in (data['camera_matrix'], data['distortion_coefficients'],
-                  data['rotation_matrix']):
+                  data['rotation_matrix'], {'data': [data['time_offset_s']]}):
         if not all(math.isfinite(x) for x in value['data']):
             raise CalibrationError(f'{os.fspath(path)}: refusing to write non-finite values')
     with open(path, 'w', encoding='utf-8') as stream:
@@ -388,3 +411,82 @@ def load_camera_info(path: PathLike) -> CameraCalibration:
         data = dict(data, rotation_matrix=np.eye(3).tolist(), translation=[0.0, 0.0, 0.0])
     return calibration_from_dict(data, source=source,
                                  raw_name=raw_name if isinstance(raw_name, str) else None)
+
+
+#: A top-level ``time_offset_s:`` line of a block-style YAML file (value and comment apart).
+_OFFSET_LINE = re.compile(r'^time_offset_s[ \t]*:[^\r\n#]*(?P<comment>#[^\r\n]*)?', re.MULTILINE)
+
+
+def _format_seconds(seconds: float) -> str:
+    """Return seconds as a YAML float with ns resolution (``-0.0123``, never ``1e-05``)."""
+    text = f'{float(seconds):.9f}'.rstrip('0')
+    text = text + '0' if text.endswith('.') else text
+    return '0.0' if text in ('-0.0', '0.0') else text
+
+
+def _with_time_offset(source: str, text: str, seconds: float) -> str:
+    """Return a calibration file's text with ``time_offset_s`` set (validated)."""
+    if isinstance(seconds, bool) or not math.isfinite(seconds):
+        raise CalibrationError(f'{source}: time_offset_s must be a finite number, got {seconds!r}')
+    newline = '\r\n' if '\r\n' in text else '\n'
+    value = _format_seconds(seconds)
+    matches = list(_OFFSET_LINE.finditer(text))
+    if len(matches) > 1:
+        raise CalibrationError(f"{source}: key 'time_offset_s' appears {len(matches)} times")
+    if matches:
+        match = matches[0]
+        comment = match.group('comment')
+        line = f'time_offset_s: {value}' + (f'  {comment}' if comment else '')
+        text = text[:match.start()] + line + text[match.end():]
+    else:
+        if text and not text.endswith(('\n', '\r')):
+            text += newline
+        text += f'time_offset_s: {value}{newline}'
+    try:
+        written = calibration_from_dict(yaml.safe_load(text), source=source)
+    except (yaml.YAMLError, CalibrationError) as err:
+        written = err
+    if not isinstance(written, CameraCalibration) or written.time_offset_s != float(value):
+        raise CalibrationError(f'{source}: cannot add time_offset_s to this file (not a block '
+                               f'mapping?); add the line "time_offset_s: {value}" by hand')
+    return text
+
+
+def write_time_offsets(offsets: Mapping[PathLike, float]) -> None:
+    """
+    Set ``time_offset_s`` in existing calibration files, keeping every other byte.
+
+    Each file's text is edited (the key's line replaced, or appended at the
+    end), never re-dumped, so comments, key order and number formatting
+    survive.  Every edit is made and validated before any file is replaced
+    (each atomically), so an error leaves all files unchanged.
+
+    :param offsets: calibration file -> offset [s] (finite)
+    :raises CalibrationError: a file is unreadable or malformed, or the edit cannot be made
+        (e.g. a flow-style ``{...}`` file)
+    """
+    texts = {}
+    for path, seconds in offsets.items():
+        source = os.fspath(path)
+        load_calibration(path)  # a malformed file is reported as such, not as a failed edit
+        try:
+            with open(path, encoding='utf-8', newline='') as stream:
+                text = stream.read()
+        except OSError as err:
+            raise CalibrationError(f'{source}: cannot read: {err.strerror}') from err
+        texts[source] = _with_time_offset(source, text, seconds)
+    for source, text in texts.items():
+        directory = os.path.dirname(os.path.abspath(source))
+        try:
+            handle, temporary = tempfile.mkstemp(prefix='.time_offset_', dir=directory)
+        except OSError as err:
+            raise CalibrationError(f'{source}: cannot write: {err.strerror}') from err
+        try:
+            with os.fdopen(handle, 'w', encoding='utf-8', newline='') as stream:
+                stream.write(text)
+            shutil.copymode(source, temporary)
+            os.replace(temporary, source)
+        except OSError as err:
+            if os.path.exists(temporary):
+                os.unlink(temporary)
+            raise CalibrationError(f'{source}: cannot write: {err.strerror}') from err

@@ -28,4 +28,6 @@ COMMAND_MODULES = [
     'sweep',
     'calibrate',
     'check',
+    'sync',
+    'refine',
 ]

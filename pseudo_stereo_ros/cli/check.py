@@ -28,6 +28,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..calibrate import epipolar_check
 from ..formats.csv_io import read_observations
+from ..offsets import apply_time_offsets, camera_time_offsets
 
 __all__ = ['BAD_MEDIAN_PX', 'GOOD_MEDIAN_PX', 'HELP', 'NAME', 'add_arguments', 'run',
            'verdict']
@@ -68,7 +69,8 @@ def run(args) -> int:
     if len(cameras) != 2:
         raise UsageError(f'--camera: check compares exactly two cameras, got {len(cameras)}')
     max_gap_ns = seconds_to_ns(args.max_gap_s, '--max-gap-s')
-    observations = read_observations(args.input)
+    # Each camera's time_offset_s (calibration file) puts its stamps on the common clock.
+    observations = apply_time_offsets(read_observations(args.input), camera_time_offsets(cameras))
     (name_a, cam_a), (name_b, cam_b) = cameras.items()
     tracks = {}
     for name in (name_a, name_b):

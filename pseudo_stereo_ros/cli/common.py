@@ -23,8 +23,9 @@ from .. import stamps
 from ..errors import RigError
 from ..rig import check_camera_name, Rig
 
-__all__ = ['add_camera_argument', 'cameras_from_args', 'check_pixel_options', 'positive',
-           'seconds_to_ns']
+__all__ = ['add_camera_argument', 'add_recording_arguments', 'cameras_from_args',
+           'check_pixel_options', 'positive', 'read_recordings', 'seconds_to_ns',
+           'time_offsets_from_args']
 
 
 def add_camera_argument(parser: argparse.ArgumentParser, *, required: bool = True) -> None:
@@ -85,3 +86,62 @@ def positive(text: str) -> float:
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f'must be positive, got {text}')
     return value
+
+
+def time_offsets_from_args(values: Sequence[str], cameras) -> dict:
+    """
+    Parse ``--time-offset NAME=SECONDS`` values (camera name -> offset [s]).
+
+    :param values: the option's values
+    :param cameras: the rig (names must be among its cameras)
+    :raises UsageError: malformed value, unknown camera, non-finite number, a name twice
+    """
+    offsets = {}
+    for value in values:
+        name, sep, number = value.partition('=')
+        name = name.strip()
+        try:
+            seconds = float(number)
+        except ValueError:
+            seconds = math.nan
+        if not sep or not name or not math.isfinite(seconds):
+            raise UsageError(f'--time-offset {value!r}: expected NAME=SECONDS (a finite number)')
+        if name not in cameras:
+            raise UsageError(f'--time-offset {value!r}: no camera {name!r} '
+                             f'(cameras: {", ".join(cameras)})')
+        if name in offsets:
+            raise UsageError(f'--time-offset {value!r}: camera {name!r} given twice')
+        offsets[name] = seconds
+    return offsets
+
+
+def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--input OBS.csv`` / ``--bag BAG`` (either, each repeatable: one recording each)."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument('--input', action='append', metavar='OBS.csv',
+                        help='observations with header stamp_ns,camera,u,v and raw stamps '
+                             '(repeat for several recordings)')
+    source.add_argument('--bag', action='append', metavar='BAG',
+                        help='a ROS 2 bag with /<camera>/ball/image_point (or image_raw, the '
+                             'detector runs first) per camera (repeat for several recordings)')
+
+
+def read_recordings(args, cameras) -> list:
+    """
+    Read the recordings of ``--input`` or ``--bag`` (one observation list per file).
+
+    :raises UsageError: a recording without observations of the first camera
+    :raises CsvError, BagError: unreadable or malformed input (the message names it)
+    """
+    from ..formats.csv_io import read_observations
+    from .track import bag_observations
+    names = list(cameras)
+    recordings = []
+    for path in args.input or []:
+        recordings.append((path, read_observations(path, cameras)))
+    for bag in args.bag or []:
+        recordings.append((bag, bag_observations(bag, names, {})[0]))
+    for source, observations in recordings:
+        if not any(obs.camera == names[0] for obs in observations):
+            raise UsageError(f'{source}: no observations of camera {names[0]!r}')
+    return [observations for _, observations in recordings]

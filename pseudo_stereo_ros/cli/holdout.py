@@ -31,6 +31,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..evaluation.holdout import holdout, HOLDOUT_METHODS, three_camera_consistency
 from ..formats.bagio import read_observations
+from ..offsets import apply_time_offsets, camera_time_offsets
 
 NAME = 'holdout'
 #: A held-out error above this is a gross error [px] (the issue's threshold).
@@ -73,7 +74,9 @@ def run(args: argparse.Namespace) -> int:
     max_gap_ns = None if args.max_gap is None else seconds_to_ns(args.max_gap, '--max-gap')
     rows, consistency = [], []
     for bag in args.bags:
-        observations = read_observations(bag, names)
+        # Each camera's time_offset_s (calibration file) puts its stamps on the common clock.
+        observations = apply_time_offsets(read_observations(bag, names),
+                                          camera_time_offsets(cameras))
         results = holdout(cameras, observations, inputs=args.inputs,
                           held_out=args.held_out, methods=args.methods,
                           sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns)

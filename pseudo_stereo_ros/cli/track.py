@@ -32,7 +32,8 @@ import cv2
 import numpy as np
 
 from . import UsageError
-from .common import add_camera_argument, cameras_from_args, seconds_to_ns
+from .common import (add_camera_argument, cameras_from_args, seconds_to_ns,
+                     time_offsets_from_args)
 from ..detection import BallDetector
 from ..errors import FuserConfigError
 from ..evaluation.table1 import score
@@ -44,6 +45,7 @@ from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..formats.yaml_io import read_yaml
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_MAX_SPEED_MPS,
                       DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser, METHODS)
+from ..offsets import apply_time_offsets, camera_time_offsets
 from ..records import Observation
 
 NAME = 'track'
@@ -72,6 +74,9 @@ def add_arguments(parser) -> None:
     parser.add_argument('--output-bag', metavar='OUT',
                         help='a new bag (mcap) with the estimates on /ball/position')
     parser.add_argument('--method', choices=METHODS, default='paper')
+    parser.add_argument('--time-offset', action='append', default=[], metavar='NAME=SECONDS',
+                        help="add SECONDS to camera NAME's stamps (overrides the time_offset_s "
+                             'of its calibration file; repeat per camera)')
     parser.add_argument('--sync-tolerance', type=float, default=DEFAULT_SYNC_TOLERANCE_NS / 1e9,
                         metavar='S', help='observations closer than this are simultaneous '
                                           '(default: %(default)s s)')
@@ -207,6 +212,7 @@ def run(args) -> int:
     if args.output_bag is not None and Path(args.output_bag).exists():
         raise UsageError(f'--output-bag {args.output_bag}: exists already, not overwriting')
     cameras = cameras_from_args(args.camera)
+    offsets = camera_time_offsets(cameras, time_offsets_from_args(args.time_offset, cameras))
     options = {'method': args.method,
                'sync_tolerance_ns': seconds_to_ns(args.sync_tolerance, '--sync-tolerance'),
                'max_gap_ns': seconds_to_ns(args.max_gap, '--max-gap'),
@@ -232,6 +238,11 @@ def run(args) -> int:
             positions = read_positions(args.bag, GROUND_TRUTH_TOPIC)
             truth = _truth_arrays(positions)
             truth_name = f'{args.bag} {GROUND_TRUTH_TOPIC}'
+    if any(offsets.values()):
+        # One boundary: stamps go on the common clock before any method sees them.
+        observations = apply_time_offsets(observations, offsets)
+        notes.append('time offsets applied: ' + ', '.join(
+            f'{name} {value * 1e3:+.3f} ms' for name, value in offsets.items()))
     estimates = fuser.process(observations)
     result = None
     if truth is not None and (estimates or args.truth):

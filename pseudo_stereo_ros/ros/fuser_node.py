@@ -28,11 +28,26 @@ looping, a restarted clock, one camera's bad stamp) bypasses the reorder
 buffer and goes to the core, which holds it until the cameras agree on the
 jump or drops it as that camera's ``stamp_outlier``; when the core starts a
 new session, the reorder buffer and the timing statistics start afresh.
+A point older than the newest fused one by more than ``max_gap_s`` (a
+replayed bag looping, a restarted clock) starts a new session: the reorder
+buffer and the timing statistics start afresh, as the core fuser does.
+
+Time offsets (:mod:`pseudo_stereo_ros.timesync`): each point's stamp is
+shifted by its camera's offset (``time_offset_s`` of its calibration file, or
+``time_offsets_s``) on arrival, before anything else sees it, so estimates are
+stamped on the common clock.  The reorder window grows by the spread of the
+offsets, so that shifted points are still fused in stamp order.  An
+:class:`~pseudo_stereo_ros.timesync.OnlineOffsetEstimator` estimates the
+offsets from the raw points of the last ``time_offset_window_s`` and reports
+them in ``/diagnostics``; with ``estimate_time_offsets`` a usable estimate is
+applied, changed by at most ``time_offset_max_slew`` seconds per second of
+stamps, so a camera's shifted stamps never go back and never jump.
 """
 
 from collections import Counter, deque
 import functools
 import math
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -43,11 +58,14 @@ from visualization_msgs.msg import Marker
 from .messages import (diagnostic_array, diagnostic_status, fill_point, point_to_observation,
                        trail_marker)
 from .node_tools import declare, load_cameras, PublisherWatch, run_node, StartupError
+from ..errors import PseudoStereoError
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, make_fuser,
                       METHODS)
+from ..offsets import camera_time_offsets, shift_observation
 from ..records import Observation
 from ..reorder import ReorderBuffer
 from ..stamps import seconds_to_ns
+from ..timesync import OnlineOffsetEstimator
 from ..trajectory import DEFAULT_MAX_WINDOW_S
 
 __all__ = ['FuserNode', 'main']
@@ -112,6 +130,22 @@ class FuserNode(Node):
         diagnostics_period_s = declare(self, 'diagnostics_period_s', 1.0,
                                        'period of /diagnostics [s]; 0 disables',
                                        min_value=0.0)
+        offsets_s = declare(self, 'time_offsets_s', [0.0],
+                            "seconds added to each camera's stamps, same order as "
+                            "camera_names; [0.0]: the calibration files' time_offset_s",
+                            read_only=True)
+        self.apply_estimates = declare(self, 'estimate_time_offsets', False,
+                                       'apply the online time-offset estimates (else report '
+                                       'them in /diagnostics only)', read_only=True)
+        offset_window_s = declare(self, 'time_offset_window_s', 10.0,
+                                  'sliding window of the online time-offset estimate [s]',
+                                  min_value=0.5, read_only=True)
+        offset_period_s = declare(self, 'time_offset_update_period_s', 1.0,
+                                  'period of the online time-offset estimate [s]; 0 disables',
+                                  min_value=0.0, read_only=True)
+        self.max_slew = declare(self, 'time_offset_max_slew', 0.005,
+                                'fastest change of an applied offset [s per s of stamps]',
+                                min_value=0.0, max_value=0.5, read_only=True)
         if not self.world_frame:
             raise StartupError('parameter world_frame: must not be empty (the frame_id of '
                                '/ball/position, e.g. world)')
@@ -129,6 +163,16 @@ class FuserNode(Node):
         options = {}
         if method == 'trajectory':
             options = {'max_window_s': path_window_s, 'order': order}
+        self.offsets_s = self._configured_offsets(names, offsets_s)
+        #: Offsets in force [ns] (move towards :attr:`_target_ns` at most max_slew).
+        self._applied_ns = {name: seconds_to_ns(value) for name, value in self.offsets_s.items()}
+        self._target_ns = dict(self._applied_ns)
+        self._last_raw_ns = {}
+        self.offset_estimator = None
+        self._worker = None
+        if offset_period_s > 0:
+            self.offset_estimator = OnlineOffsetEstimator(self.cameras, self.offsets_s,
+                                                          window_s=offset_window_s)
         try:
             self.fuser = make_fuser(self.cameras, method=method,
                                     sync_tolerance_ns=_seconds_to_ns('sync_tolerance_s', sync_s),
@@ -143,7 +187,9 @@ class FuserNode(Node):
                                f'image_margin, max_speed_mps, workspace_*_m, trajectory_*): '
                                f'{err}') from err
         self._names = list(names)
-        self._window_ns = _seconds_to_ns('reorder_window_s', window_s)
+        self._base_window_ns = _seconds_to_ns('reorder_window_s', window_s)
+        self._window_ns = self._base_window_ns + self._offset_spread_ns()
+        self._max_gap_ns = self.fuser.max_gap_ns
         self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
         #: Counts: ``late`` (points older than one already fused, over all sessions),
         #: ``sessions`` (new sessions the core started: stamps jumped, or the rig paused).
@@ -173,23 +219,82 @@ class FuserNode(Node):
                                      functools.partial(self._on_point, name), 100)
             for name in names]
         self._flush_timer = None
-        if self.buffer.window_ns > 0:
-            self._flush_timer = self.create_timer(window_s, self._on_flush_timer)
+        if self.buffer.window_ns > 0 or self.apply_estimates:
+            self._flush_timer = self.create_timer(max(window_s, 0.005), self._on_flush_timer)
             self._flush_timer.cancel()
         if marker_period_s > 0:
             self.create_timer(marker_period_s, self._publish_marker)
         if diagnostics_period_s > 0:
             self.create_timer(diagnostics_period_s, self._publish_diagnostics)
+        if self.offset_estimator is not None:
+            self.create_timer(offset_period_s, self._estimate_offsets)
         self.get_logger().info(
             f'fusing {", ".join(names)} with method {method!r} -> '
             f'{self._position_pub.topic_name}')
 
     # -- callbacks ------------------------------------------------------------------------------
 
+    def _configured_offsets(self, names, offsets_s) -> dict:
+        """Return the offsets [s] in force at start-up (parameter over calibration files)."""
+        overrides = None
+        if list(offsets_s) != [0.0]:
+            if len(offsets_s) != len(names):
+                raise StartupError(f'parameter time_offsets_s: {len(offsets_s)} values for '
+                                   f'{len(names)} camera_names (one per camera, same order)')
+            overrides = dict(zip(names, offsets_s))
+        try:
+            return camera_time_offsets(self.cameras, overrides)
+        except PseudoStereoError as err:
+            raise StartupError(f'parameter time_offsets_s: {err}') from err
+
+    def _offset_spread_ns(self) -> int:
+        values = list(self._applied_ns.values()) + list(self._target_ns.values())
+        return max(values) - min(values) if values else 0
+
+    def _shift(self, observation: Observation) -> Observation:
+        """Put a raw observation on the common clock (slewing the camera's applied offset)."""
+        name, stamp = observation.camera, observation.stamp_ns
+        applied, target = self._applied_ns[name], self._target_ns[name]
+        last = self._last_raw_ns.get(name)
+        if applied != target and last is not None and stamp > last:
+            # At most max_slew seconds of change per second of stamps: below 1, a camera's
+            # shifted stamps keep their order and never jump.
+            room = int(self.max_slew * (stamp - last))
+            applied += max(-room, min(room, target - applied))
+            self._applied_ns[name] = applied
+        if last is None or stamp > last or last - stamp > self._max_gap_ns:
+            self._last_raw_ns[name] = stamp
+        return shift_observation(observation, applied)
+
+    def _estimate_offsets(self) -> None:
+        """Take the finished estimate, start the next one (in a worker: fusion never waits)."""
+        if self._worker is not None and self._worker.is_alive():
+            return
+        estimate = self.offset_estimator.latest
+        if estimate is not None and self.apply_estimates:
+            for name in self._names[1:]:
+                if self.offset_estimator.usable(name):
+                    self._target_ns[name] = seconds_to_ns(estimate.offsets_s[name])
+            self._window_ns = self._base_window_ns + self._offset_spread_ns()
+            self.buffer.window_ns = self._window_ns
+        if self.offset_estimator.added:
+            self._worker = threading.Thread(target=self.offset_estimator.update,
+                                            name='time offsets', daemon=True)
+            self._worker.start()
+
+    def destroy_node(self):
+        """Wait for a running offset estimate, then destroy the node."""
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+        return super().destroy_node()
+
     def _on_point(self, name: str, msg: PointStamped) -> None:
         start = time.perf_counter()
         self._inputs[name] += 1
-        observation = point_to_observation(msg, name)
+        raw = point_to_observation(msg, name)
+        if self.offset_estimator is not None:
+            self.offset_estimator.add(raw)
+        observation = self._shift(raw)
         if self.fuser.off_timeline(observation.stamp_ns):
             self._off_timeline(observation)
             return
@@ -280,6 +385,7 @@ class FuserNode(Node):
         values['new sessions (time jumped or paused)'] = self.node_stats['sessions']
         values[f'other publishers of {self._position_pub.topic_name}'] = \
             self.position_watch.others
+        values.update(self._offset_values())
         inputs = sum(self._inputs.values())
         if inputs and not estimates:
             level, message = 'warn', 'receiving image points but no estimates yet'
@@ -291,6 +397,25 @@ class FuserNode(Node):
                                    values)
         self._diagnostics_pub.publish(
             diagnostic_array(self.get_clock().now().nanoseconds, [status]))
+
+    def _offset_values(self) -> dict:
+        """Return the /diagnostics entries of the time offsets (applied and estimated)."""
+        values = {}
+        estimate = self.offset_estimator.latest if self.offset_estimator else None
+        for name in self._names:
+            values[f'time offset {name} applied [ms]'] = self._applied_ns[name] / 1e6
+            if name == self._names[0] or self.offset_estimator is None:
+                continue
+            if estimate is None:
+                values[f'time offset {name} status'] = 'no estimate yet'
+                continue
+            values[f'time offset {name} estimate [ms]'] = estimate.offsets_s[name] * 1e3
+            values[f'time offset {name} uncertainty [ms]'] = estimate.uncertainty_s[name] * 1e3
+            values[f'time offset {name} samples'] = estimate.samples[name]
+            warnings = estimate.warnings.get(name)
+            values[f'time offset {name} status'] = warnings[0] if warnings else (
+                'applied' if self.apply_estimates else 'ok (report only)')
+        return values
 
 
 def main(args=None) -> int:
