@@ -365,11 +365,18 @@ def test_detector_throttles_the_bad_image_error(context, namespace, throttle_s, 
     assert errors[0].startswith('image dropped: empty image') and '(1 so far)' in errors[0]
 
 
+def _number(text):
+    try:
+        return float(text)
+    except ValueError:
+        return text  # a status word (e.g. a time offset's 'no estimate yet')
+
+
 def _diagnostics(msg, name):
     """Return the values of the status of node ``name`` in a DiagnosticArray, or None."""
     for status in msg.status:
         if status.name.startswith(f'{name}: '):
-            return status, {item.key: float(item.value) for item in status.values}
+            return status, {item.key: _number(item.value) for item in status.values}
     return None
 
 
