@@ -35,13 +35,16 @@ put them on the rig's common shutter clock (see
 that key of existing files.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
 import os
 import re
 import shutil
 import tempfile
-from typing import Any, Mapping, Optional, Tuple, Union
+from typing import Any
 
 import numpy as np
 import yaml
@@ -78,7 +81,7 @@ ROTATION_TOLERANCE = 1e-5
 #: Largest image side [px]: OpenCV keeps image sizes in 32-bit ints.
 MAX_IMAGE_SIZE_PX = 2 ** 31 - 1
 
-PathLike = Union[str, os.PathLike]
+PathLike = str | os.PathLike
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,7 +133,7 @@ def _show(value: Any) -> str:
     return text if len(text) <= 40 else f'a number of {len(text)} digits'
 
 
-def _integer(value: Any) -> Optional[int]:
+def _integer(value: Any) -> int | None:
     """Return ``value`` as an int if it is a whole number (``640`` or ``640.0``), else None."""
     if isinstance(value, bool):
         return None
@@ -147,23 +150,24 @@ def _entry(data: Mapping[str, Any], key: str, source: str) -> Any:
     return data[key]
 
 
-def _numbers(value: Any, key: str, source: str) -> Tuple[np.ndarray, Optional[Tuple[int, int]]]:
+def _numbers(value: Any, key: str, source: str) -> tuple[np.ndarray, tuple[int, int] | None]:
     """
     Read a matrix value: ``{rows, cols, data}``, a nested list or a flat list of numbers.
 
     :return: the finite values, flat, and the shape the value declares (rows and cols, or
         the nesting), if any
     """
-    declared = None
+    declared: tuple[int, int] | None = None
     if isinstance(value, Mapping):
         if 'data' not in value:
             raise _fail(source, key, "missing 'data' (expected {rows, cols, data})")
         rows, cols = value.get('rows'), value.get('cols')
         if rows is not None or cols is not None:
-            declared = (_integer(rows), _integer(cols))
-            if None in declared or min(declared) < 1:
+            n_rows, n_cols = _integer(rows), _integer(cols)
+            if n_rows is None or n_cols is None or min(n_rows, n_cols) < 1:
                 raise _fail(source, key, f'rows and cols must be positive integers, got '
                                          f'{_show(rows)} and {_show(cols)}')
+            declared = (n_rows, n_cols)
         value = value['data']
     if not isinstance(value, list):
         raise _fail(source, key, f'expected a list of numbers, got {_show(value)}')
@@ -209,7 +213,7 @@ def _matrix(data: Mapping[str, Any], key: str, shape: tuple, source: str) -> np.
 # -- one reader per key -------------------------------------------------------------------------
 
 
-def _camera_name(data: Mapping[str, Any], source: str, raw_name: Optional[str]) -> str:
+def _camera_name(data: Mapping[str, Any], source: str, raw_name: str | None) -> str:
     _entry(data, 'camera_name', source)
     name = raw_name if raw_name is not None else data['camera_name']
     if not isinstance(name, (str, int, float)) or isinstance(name, bool):
@@ -241,7 +245,7 @@ def _camera_matrix(data: Mapping[str, Any], source: str) -> np.ndarray:
     return camera_matrix
 
 
-def _distortion(data: Mapping[str, Any], source: str) -> Tuple[str, np.ndarray]:
+def _distortion(data: Mapping[str, Any], source: str) -> tuple[str, np.ndarray]:
     """Read ``distortion_model`` and its ``distortion_coefficients``."""
     model = str(_entry(data, 'distortion_model', source))
     if model not in DISTORTION_MODELS:
@@ -276,7 +280,7 @@ def _time_offset(data: Mapping[str, Any], source: str) -> float:
 
 
 def calibration_from_dict(data: Mapping[str, Any], *, source: str = '<dict>',
-                          raw_name: str = None) -> CameraCalibration:
+                          raw_name: str | None = None) -> CameraCalibration:
     """
     Build a calibration from a parsed YAML mapping, validating every key.
 
@@ -442,11 +446,12 @@ def _with_time_offset(source: str, text: str, seconds: float) -> str:
         if text and not text.endswith(('\n', '\r')):
             text += newline
         text += f'time_offset_s: {value}{newline}'
+    written: CameraCalibration | None
     try:
         written = calibration_from_dict(yaml.safe_load(text), source=source)
-    except (yaml.YAMLError, CalibrationError) as err:
-        written = err
-    if not isinstance(written, CameraCalibration) or written.time_offset_s != float(value):
+    except (yaml.YAMLError, CalibrationError):
+        written = None
+    if written is None or written.time_offset_s != float(value):
         raise CalibrationError(f'{source}: cannot add time_offset_s to this file (not a block '
                                f'mapping?); add the line "time_offset_s: {value}" by hand')
     return text

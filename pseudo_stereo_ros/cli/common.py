@@ -14,9 +14,11 @@
 
 """Argument helpers shared by the subcommands."""
 
+from __future__ import annotations
+
 import argparse
+from collections.abc import Sequence
 import math
-from typing import Sequence
 
 from . import UsageError
 from .. import stamps
@@ -46,7 +48,7 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
         too few cameras
     :raises CalibrationError: a calibration file is missing or malformed
     """
-    files = []
+    files: list[tuple[str, str]] = []
     for value in values:
         name, sep, path = value.partition('=')
         name, path = name.strip(), path.strip()

@@ -24,6 +24,8 @@ an input.  When the flights do not determine the result it writes nothing and
 exits with status 2.
 """
 
+from __future__ import annotations
+
 import math
 import os
 from pathlib import Path
@@ -104,7 +106,7 @@ def _outputs(args, cameras) -> dict:
     for value in args.camera:
         name, _, path = value.partition('=')
         inputs[name.strip()] = Path(path.strip())
-    outputs = {}
+    outputs: dict[str, Path] = {}
     for name in cameras:
         target = out_dir / inputs[name].name
         if target in outputs.values():
