@@ -394,7 +394,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         except STARTUP_ERRORS as err:
             print(f'bringup: error: cannot start: {err}', file=sys.stderr)
             return 1
-        check_params_files(nodes, init_args)
+        # The package's own bringup.yaml has sections for both camera modes (camera_detector,
+        # detector on a driver's topic): only the files a user gave are checked.
+        check_params_files(nodes, init_args if options.params_file else ['bringup'] + ros_args)
         started = time.monotonic()
         spin(nodes, executor=options.executor, context=context,
              duration_s=options.duration if options.duration > 0 else None)
