@@ -72,11 +72,12 @@ import math
 
 from .camera import Camera
 from .errors import FuserConfigError
+from .estimator import GatedEstimator
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
-from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
+from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate, Observation, Point3
 from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
-                     INPUT_DROP_REASONS, InputGate, stamp_sort_key)
+                     INPUT_DROP_REASONS, stamp_sort_key)
 from .trajectory import TrajectoryFuser
 
 __all__ = [
@@ -148,7 +149,7 @@ class _View:
         return self.camera.direction_of((iu - cx - skew * y) / fx, y)
 
 
-class Fuser:
+class Fuser(GatedEstimator):
     """
     Event-driven fusion of stamped image points from unsynchronized cameras.
 
@@ -175,35 +176,14 @@ class Fuser:
                  max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
                  workspace_min_m: Sequence[float] | None = None,
                  workspace_max_m: Sequence[float] | None = None):
-        if isinstance(cameras, Mapping):
-            cameras = list(cameras.values())
-        cameras = list(cameras)
-        if len(cameras) < 2:
-            raise FuserConfigError(f'the fuser needs at least two cameras, got {len(cameras)}')
-        names = [camera.name for camera in cameras]
-        if len(set(names)) != len(names):
-            raise FuserConfigError(f'camera names must be unique, got {names}')
         if method not in _FUSER_METHODS:
             raise FuserConfigError(f'unknown method {method!r} for Fuser (known: '
                                    f'{", ".join(_FUSER_METHODS)}; make_fuser() builds any of '
                                    f'{", ".join(METHODS)})')
-        #: Counts: ``observations``, ``estimates``, ``resets``, ``late`` and one key per drop
-        #: reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
-        #: ``gate.held`` at all times.
-        self.stats: Counter[str] = Counter()
-        #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
-        self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
-                              max_gap_ns=max_gap_ns, image_margin=image_margin,
-                              stats=self.stats)
-        #: The plausibility gate of the estimates.
-        self.plausibility = PlausibilityGate(max_speed_mps=max_speed_mps,
-                                             workspace_min_m=workspace_min_m,
-                                             workspace_max_m=workspace_max_m,
-                                             window_ns=self.gate.max_gap_ns, stats=self.stats)
-        #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
-        self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
-        #: The configured upper bound of the max gap [ns].
-        self.max_gap_ns = self.gate.max_gap_ns
+        super().__init__(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                         image_margin=image_margin, max_speed_mps=max_speed_mps,
+                         workspace_min_m=workspace_min_m, workspace_max_m=workspace_max_m)
+        cameras = self.cameras
         self.method = method
         self._views = {camera.name: _View(camera) for camera in cameras}
         for view in self._views.values():
@@ -214,43 +194,10 @@ class Fuser:
                                                          for row in f)
         self._update = self._paper if method == 'paper' else self._naive
 
-    @property
-    def camera_names(self) -> list[str]:
-        """Return the configured camera names, in order."""
-        return list(self._views)
-
-    @property
-    def sync_tolerance_ns(self) -> int:
-        """Return the sync tolerance in force [ns] (the gate's)."""
-        return self.gate.sync_tolerance_ns
-
-    @property
-    def session(self) -> int:
-        """Return the session number: it increments whenever the gate starts a new session."""
-        return self.gate.session
-
-    def off_timeline(self, stamp_ns: int) -> bool:
-        """
-        Tell whether a stamp jumps away from the current session (see the gate).
-
-        The fuser node asks this before buffering a point: such a point goes to
-        :meth:`update` directly, which holds it until the cameras agree on a new session
-        (:attr:`session` changes) or drops it as one camera's ``stamp_outlier``.
-
-        :param stamp_ns: the stamp [ns]
-        :return: True when farther than the rig's max gap from the session's newest stamp
-        """
-        return self.gate.off_timeline(stamp_ns)
-
-    def reset(self) -> None:
-        """Forget all history, the measured frame periods included (counters are kept)."""
-        self.gate.reset()
-        self._forget()
-
     def _forget(self) -> None:
+        super()._forget()
         for view in self._views.values():
             view.frames.clear()
-        self.plausibility.reset()
 
     def update(self, observation: Observation) -> Estimate | None:
         """

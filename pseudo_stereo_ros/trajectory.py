@@ -105,7 +105,6 @@ later judged stray; their event already counted as an estimate or a drop).
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 import math
 from typing import TypeAlias
@@ -114,9 +113,10 @@ import numpy as np
 
 from .camera import Camera
 from .errors import FuserConfigError
-from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
+from .estimator import GatedEstimator
+from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate, Observation
-from .timing import Admitted, INPUT_DROP_REASONS, InputGate, stamp_sort_key
+from .timing import Admitted, INPUT_DROP_REASONS, stamp_sort_key
 
 __all__ = [
     'DEFAULT_CONSISTENCY',
@@ -217,7 +217,7 @@ def _sizes(count: int) -> np.ndarray:
     return sizes
 
 
-class TrajectoryFuser:
+class TrajectoryFuser(GatedEstimator):
     """
     Causal multi-camera trajectory fit: one observation in, at most one estimate out.
 
@@ -262,33 +262,14 @@ class TrajectoryFuser:
                  min_sigma_px: float = DEFAULT_MIN_SIGMA_PX,
                  max_uncertainty: float = DEFAULT_MAX_UNCERTAINTY, order: int = 2,
                  pending_estimate: str = 'impact') -> None:
-        if isinstance(cameras, Mapping):
-            cameras = list(cameras.values())
-        cameras = list(cameras)
-        if len(cameras) < 2:
-            raise FuserConfigError(f'the fuser needs at least two cameras, got {len(cameras)}')
-        names = [camera.name for camera in cameras]
-        if len(set(names)) != len(names):
-            raise FuserConfigError(f'camera names must be unique, got {names}')
-        #: Counts: ``observations``, ``estimates``, ``resets``, ``late``, ``breaks``
-        #: (impacts), ``outlier`` (pending detections judged stray), ``predicted`` (estimates
-        #: at pending detections), ``restarts`` (path lost, fitted afresh), and one key per
-        #: drop reason of :data:`DROP_REASONS`; ``observations`` = ``estimates`` + drops +
-        #: ``gate.held`` at all times.
-        self.stats: Counter[str] = Counter()
-        #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
-        self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
-                              max_gap_ns=max_gap_ns, image_margin=image_margin,
-                              stats=self.stats)
-        #: The plausibility gate of the estimates.
-        self.plausibility = PlausibilityGate(max_speed_mps=max_speed_mps,
-                                             workspace_min_m=workspace_min_m,
-                                             workspace_max_m=workspace_max_m,
-                                             window_ns=self.gate.max_gap_ns, stats=self.stats)
-        #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
-        self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
-        #: The configured upper bound of the max gap [ns].
-        self.max_gap_ns = self.gate.max_gap_ns
+        super().__init__(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                         image_margin=image_margin, max_speed_mps=max_speed_mps,
+                         workspace_min_m=workspace_min_m, workspace_max_m=workspace_max_m)
+        cameras = self.cameras
+        names = self.camera_names
+        # Counts beyond the shared ones (:attr:`stats`): ``resets``, ``late``, ``breaks``
+        # (impacts), ``outlier`` (pending detections judged stray), ``predicted`` (estimates at
+        # pending detections), ``restarts`` (path lost, fitted afresh); see DROP_REASONS.
         for name, value in (('max_window_s', max_window_s), ('consistency', consistency),
                             ('innovation_gate', innovation_gate), ('min_sigma_px', min_sigma_px),
                             ('max_uncertainty', max_uncertainty)):
@@ -336,38 +317,9 @@ class TrajectoryFuser:
         self._log_variance: float | None = None
         self._forget()
 
-    @property
-    def camera_names(self) -> list[str]:
-        """Return the configured camera names, in order."""
-        return list(self._names)
-
-    @property
-    def sync_tolerance_ns(self) -> int:
-        """Return the sync tolerance in force [ns] (the gate's)."""
-        return self.gate.sync_tolerance_ns
-
-    @property
-    def session(self) -> int:
-        """Return the session number: it increments whenever the gate starts a new session."""
-        return self.gate.session
-
-    def off_timeline(self, stamp_ns: int) -> bool:
-        """
-        Tell whether a stamp jumps away from the current session (see the gate).
-
-        :param stamp_ns: the stamp [ns]
-        :return: True when farther than the rig's max gap from the session's newest stamp
-        """
-        return self.gate.off_timeline(stamp_ns)
-
-    def reset(self) -> None:
-        """Forget the flight and the measured frame periods (noise and counters are kept)."""
-        self.gate.reset()
-        self._forget()
-
     def _forget(self) -> None:
-        """Forget the flight (a new session): window, path, impacts, plausibility history."""
-        self.plausibility.reset()
+        """Forget the flight (a new session): window, path, impacts (the noise is kept)."""
+        super()._forget()
         self._start = self._end = 0
         self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit

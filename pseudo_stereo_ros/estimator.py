@@ -1,0 +1,132 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What every estimation method shares: cameras, input and timing rules, plausibility gate.
+
+:class:`GatedEstimator` is the base of :class:`~pseudo_stereo_ros.fusion.Fuser`
+(``paper``, ``naive``) and :class:`~pseudo_stereo_ros.trajectory.TrajectoryFuser`
+(``trajectory``).  It checks the cameras, builds the counters, the
+:class:`~pseudo_stereo_ros.timing.InputGate` (validation, frame periods, max
+gaps, sync tolerance, sessions) and the
+:class:`~pseudo_stereo_ros.plausibility.PlausibilityGate` from the same
+options, and answers the session questions the fuser node asks.  A method
+adds its own ``update``, ``process`` and ``_forget``.  ROS-free.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+
+from .camera import Camera
+from .errors import FuserConfigError
+from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
+from .timing import InputGate
+
+__all__ = ['GatedEstimator', 'camera_list']
+
+
+def camera_list(cameras: Sequence[Camera] | Mapping[str, Camera]) -> list[Camera]:
+    """
+    Return the cameras of an estimator as a list, checked.
+
+    :param cameras: a sequence, or a mapping name -> camera
+    :raises FuserConfigError: fewer than two cameras, or a repeated name
+    """
+    cameras = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
+    if len(cameras) < 2:
+        raise FuserConfigError(f'the fuser needs at least two cameras, got {len(cameras)}')
+    names = [camera.name for camera in cameras]
+    if len(set(names)) != len(names):
+        raise FuserConfigError(f'camera names must be unique, got {names}')
+    return cameras
+
+
+class GatedEstimator:
+    """
+    The shared part of every method: counters, the input gate and the plausibility gate.
+
+    :param cameras: the calibrated cameras (checked by :func:`camera_list`)
+    :param sync_tolerance_ns: see :class:`~pseudo_stereo_ros.fusion.Fuser` [ns]
+    :param max_gap_ns: see :class:`~pseudo_stereo_ros.fusion.Fuser` [ns]
+    :param image_margin: see :class:`~pseudo_stereo_ros.fusion.Fuser`
+    :param max_speed_mps: see :class:`~pseudo_stereo_ros.fusion.Fuser` [m/s]
+    :param workspace_min_m: see :class:`~pseudo_stereo_ros.fusion.Fuser` [m]
+    :param workspace_max_m: see :class:`~pseudo_stereo_ros.fusion.Fuser` [m]
+    :raises FuserConfigError: an invalid option, naming it
+    """
+
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
+                 sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,
+                 image_margin: float | None = None,
+                 max_speed_mps: float | None = DEFAULT_MAX_SPEED_MPS,
+                 workspace_min_m: Sequence[float] | None = None,
+                 workspace_max_m: Sequence[float] | None = None) -> None:
+        cameras = camera_list(cameras)
+        #: The cameras, in order.
+        self.cameras = cameras
+        #: Counts: ``observations``, ``estimates`` and one key per drop reason (each method
+        #: documents its own); ``observations`` = ``estimates`` + drops + ``gate.held``.
+        self.stats: Counter[str] = Counter()
+        #: The shared input and timing rules (:class:`~pseudo_stereo_ros.timing.InputGate`).
+        self.gate = InputGate(cameras, sync_tolerance_ns=sync_tolerance_ns,
+                              max_gap_ns=max_gap_ns, image_margin=image_margin,
+                              stats=self.stats)
+        #: The plausibility gate of the estimates.
+        self.plausibility = PlausibilityGate(max_speed_mps=max_speed_mps,
+                                             workspace_min_m=workspace_min_m,
+                                             workspace_max_m=workspace_max_m,
+                                             window_ns=self.gate.max_gap_ns, stats=self.stats)
+        #: The configured tolerance [ns]; :attr:`sync_tolerance_ns` is the one in force.
+        self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
+        #: The configured upper bound of the max gap [ns].
+        self.max_gap_ns = self.gate.max_gap_ns
+
+    @property
+    def camera_names(self) -> list[str]:
+        """Return the configured camera names, in order."""
+        return [camera.name for camera in self.cameras]
+
+    @property
+    def sync_tolerance_ns(self) -> int:
+        """Return the sync tolerance in force [ns] (the gate's)."""
+        return self.gate.sync_tolerance_ns
+
+    @property
+    def session(self) -> int:
+        """Return the session number: it increments whenever the gate starts a new session."""
+        return self.gate.session
+
+    def off_timeline(self, stamp_ns: int) -> bool:
+        """
+        Tell whether a stamp jumps away from the current session (see the gate).
+
+        The fuser node asks this before buffering a point: such a point goes to
+        ``update`` directly, which holds it until the cameras agree on a new session
+        (:attr:`session` changes) or drops it as one camera's ``stamp_outlier``.
+
+        :param stamp_ns: the stamp [ns]
+        :return: True when farther than the rig's max gap from the session's newest stamp
+        """
+        return self.gate.off_timeline(stamp_ns)
+
+    def reset(self) -> None:
+        """Forget all history, the measured frame periods included (counters are kept)."""
+        self.gate.reset()
+        self._forget()
+
+    def _forget(self) -> None:
+        """Forget the flight (a new session); a method extends this with its own state."""
+        self.plausibility.reset()
