@@ -323,16 +323,26 @@ def load_calibration(path: PathLike) -> CameraCalibration:
     :raises CalibrationError: the file is missing, not YAML, or malformed; one line naming
         the file, the line or the key, and the reason
     """
-    source = os.fspath(path)
+    data, raw_name = _read_calibration_yaml(path)
+    return calibration_from_dict(data, source=os.fspath(path), raw_name=raw_name)
+
+
+def _read_calibration_yaml(path: PathLike) -> tuple[Any, str | None]:
+    """
+    Read a calibration or camera_info file through the guarded YAML reader.
+
+    :return: the document, and ``camera_name`` as written (a numeric name keeps its digits:
+        0123, 1e5), or None
+    :raises CalibrationError: unreadable, too large, nested too deep, aliases, not YAML
+    """
     data, node = read_yaml(path, error=CalibrationError)
     raw_name = None
     if isinstance(node, yaml.MappingNode):
-        # The scalar as written, so a numeric camera_name keeps its digits (0123, 1e5).
         raw_name = next((value.value for key, value in node.value
                          if isinstance(key, yaml.ScalarNode) and key.value == 'camera_name'
                          and isinstance(value, yaml.ScalarNode) and value.tag.endswith(
                              (':int', ':float', ':str'))), None)
-    return calibration_from_dict(data, source=source, raw_name=raw_name)
+    return data, raw_name
 
 
 def _yaml_matrix(array: np.ndarray) -> dict:
@@ -399,22 +409,10 @@ def load_camera_info(path: PathLike) -> CameraCalibration:
         the key and the reason); a pose with only one of ``rotation_matrix`` and
         ``translation`` is malformed
     """
-    source = os.fspath(path)
-    try:
-        with open(path, encoding='utf-8') as stream:
-            text = stream.read()
-    except OSError as err:
-        raise CalibrationError(f'{source}: cannot read calibration file: {err.strerror}') from err
-    try:
-        data = yaml.safe_load(text)
-        raw = yaml.load(text, Loader=yaml.BaseLoader)  # noqa: S506 - BaseLoader builds no objects
-    except yaml.YAMLError as err:
-        raise CalibrationError(f'{source}: not valid YAML: {err}') from err
-    raw_name = raw.get('camera_name') if isinstance(raw, dict) else None
+    data, raw_name = _read_calibration_yaml(path)
     if isinstance(data, dict) and 'rotation_matrix' not in data and 'translation' not in data:
         data = dict(data, rotation_matrix=np.eye(3).tolist(), translation=[0.0, 0.0, 0.0])
-    return calibration_from_dict(data, source=source,
-                                 raw_name=raw_name if isinstance(raw_name, str) else None)
+    return calibration_from_dict(data, source=os.fspath(path), raw_name=raw_name)
 
 
 #: A top-level ``time_offset_s:`` line of a block-style YAML file (value and comment apart).

@@ -189,3 +189,12 @@ class _no_exit:  # noqa: N801 - a context manager used like pytest.raises
 def test_video_boards_rejects_bad_options(board_video):
     with pytest.raises(CalibrationFitError, match='every_n >= 1'):
         video_boards(str(board_video), board=BOARD, every_n=0)
+
+
+def test_camera_info_files_go_through_the_guarded_yaml_reader(tmp_path):
+    # The same reader as calibration files: an alias (a YAML bomb's building block) is refused
+    # at once, with the file's name, instead of being expanded.
+    path = tmp_path / 'bomb.yaml'
+    path.write_text(OST_YAML + 'a: &a [1, 1, 1]\nb: [*a, *a, *a]\n')
+    with pytest.raises(CalibrationError, match='bomb.yaml:.*aliases are not allowed'):
+        load_camera_info(path)
