@@ -318,7 +318,10 @@ def test_three_virtual_cameras_give_the_summed_rate_and_beat_every_pair(tmp_path
         rclpy.try_shutdown(context=context)
     shutters = sorted(int(s) for c in cameras for s in shutter_stamps(
         c['fps'], scenario.duration_s, phase_s=c['phase_s'], epoch_ns=epoch))
-    assert all(epoch <= p.stamp_ns <= flight_end for p in points)
+    # The first flight only: on a loaded machine the spin may end after the next flight's
+    # first frames (the loop's pause is 0.5 s), which belong to another flight.
+    points = [p for p in points if epoch <= p.stamp_ns <= flight_end]
+    positions = [p for p in positions if epoch <= p[0] <= flight_end]
     # The cameras ran at their rates (a machine too loaded to render skips a few frames; the
     # bound stays above 0.75, the share of the shutters of the best pair, a + c: 90 of 120 Hz) ...
     assert len(points) >= 0.8 * len(shutters)
