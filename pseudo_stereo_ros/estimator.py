@@ -33,7 +33,8 @@ from collections.abc import Mapping, Sequence
 from .camera import Camera
 from .errors import FuserConfigError
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
-from .timing import InputGate
+from .records import Estimate, Observation
+from .timing import Admitted, InputGate
 
 __all__ = ['GatedEstimator', 'camera_list']
 
@@ -130,3 +131,24 @@ class GatedEstimator:
     def _forget(self) -> None:
         """Forget the flight (a new session); a method extends this with its own state."""
         self.plausibility.reset()
+
+    def update(self, observation: Observation) -> Estimate | None:
+        """
+        Process one observation.
+
+        :param observation: camera name, stamp [ns], raw pixel
+        :return: the estimate at this shutter event, or None (the reason is counted in stats,
+            or the observation is held by the gate until a new session is confirmed)
+        """
+        admission = self.gate.admit(observation)
+        if admission.new_session:
+            self._forget()
+        result = None
+        for item in admission.ready:
+            # Only the last can give an estimate: the others open a session from one camera.
+            result = self._fuse(item)
+        return result
+
+    def _fuse(self, item: Admitted) -> Estimate | None:
+        """Estimate at one admitted observation (the method), or None (counted)."""
+        raise NotImplementedError

@@ -345,23 +345,6 @@ class TrajectoryFuser(GatedEstimator):
 
     # -- the method -----------------------------------------------------------------------------
 
-    def update(self, observation: Observation) -> Estimate | None:
-        """
-        Process one observation.
-
-        :param observation: camera name, stamp [ns], raw pixel
-        :return: the estimate at this shutter event, or None (the reason is counted in stats,
-            or the observation is held by the gate until a new session is confirmed)
-        """
-        admission = self.gate.admit(observation)
-        if admission.new_session:
-            self._forget()
-        result = None
-        for item in admission.ready:
-            # Only the last can give an estimate: the others open a session from one camera.
-            result = self._fuse(item)
-        return result
-
     def _fuse(self, item: Admitted) -> Estimate | None:
         """Fit one admitted observation; return its plausible estimate, or None (counted)."""
         camera, stamp, _, _ = item.observation
