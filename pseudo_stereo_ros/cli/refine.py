@@ -146,7 +146,7 @@ def run(args) -> int:
                                   for name in cameras}, max_gap_s=args.max_gap_s)
     _print(result, before, after, args)
     if result.refusals:
-        raise CalibrationFitError('refine: not written: ' + '; '.join(result.refusals))
+        raise CalibrationFitError('not written: ' + '; '.join(result.refusals))
     Path(args.out_dir).mkdir(parents=True, exist_ok=True)
     for name, path in outputs.items():
         save_calibration(result.calibrations[name], path)
