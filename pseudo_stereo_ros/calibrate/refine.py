@@ -15,8 +15,8 @@
 """
 Refine a rig's extrinsics (optionally focal lengths) and time offsets from ball flights.
 
-Bundle adjustment (:func:`scipy.optimize.least_squares`, soft-L1 loss, a
-sparse finite-difference Jacobian) over recorded flights:
+Bundle adjustment over recorded flights, robust (soft-L1) least squares with
+:func:`scipy.optimize.least_squares`:
 
 - **Unknowns.** The ball position [m] at every detection of the reference
   (first) camera, on the common clock ``stamp + o_ref``; each camera's
@@ -30,20 +30,33 @@ sparse finite-difference Jacobian) over recorded flights:
   time ``stamp + o`` by a cubic Lagrange polynomial through the four
   nearest reference detections of the same flight (a linear chord of a
   curved flight would bias offsets and poses).  A flight is a run of
-  reference detections without a gap over ``max_gap_s``.
+  reference detections without a gap over ``max_gap_s``.  Loose smoothness
+  rows (the third difference of four consecutive positions) remove the
+  null modes of the interpolated positions; outliers (a cubic across a
+  bounce) are left out round by round.
+- **Solver.** Variable projection (:class:`_Solver`): least_squares over the
+  camera parameters, the ball positions solved inside for each camera state
+  by banded Gauss-Newton steps, the reduced Jacobian from the implicit
+  function theorem (analytic throughout).
 - **Gauge.** By default the reference camera's pose is fixed and the scale
   by the baseline between the first two cameras (the given one, or
   ``baseline_m``): the second camera's centre moves on a sphere about the
   first.  ``keep_world`` instead frees every pose and holds each near its
-  given value by a prior (``prior_deg``, ``prior_m``, one sigma), so that the
-  world frame other consumers use does not move.
-- **Refusal.** The covariance of the camera parameters (Schur complement
-  of the ball positions, scaled by the robust residual scale) gives a
-  1-sigma uncertainty of each; a rotation, centre, focal length or offset
-  above its bound, too few flights (``min_flights``), or a failed solve puts
-  a reason in :attr:`RefineResult.refusals` and nothing should be written.
-  A time offset strongly correlated with a pose (``|r| > 0.9``) is reported
-  as confounded: the flights barely tell a time shift from a pose error.
+  given value by a prior (``prior_deg``, ``prior_m``, one sigma; quadratic,
+  not robust), so that the world frame other consumers use does not move as
+  a whole; the baseline's length is held as well (flights cannot give a
+  scale).  With equal priors a correction is shared among the cameras.
+- **Refusal.** The covariance of the camera parameters (the detection noise
+  estimated from the tracks, over the reduced Jacobian's information) gives a
+  1-sigma uncertainty of each (with ``keep_world``: of the rig's relative
+  geometry); a rotation, centre, focal length or offset above its bound, too
+  few flights (``min_flights``), a failed solve, or a result that reprojects
+  worse than the given calibration puts a reason in
+  :attr:`RefineResult.refusals` and nothing should be written.  Flights that
+  leave a parameter ten times its bound undetermined are refused before any
+  search.  A time offset strongly correlated with a pose (``|r| > 0.9``) is
+  reported as confounded: the flights barely tell a time shift from a pose
+  error.
 
 Units: metres, radians inside (degrees in reports), seconds, raw pixels.
 ROS-free.
@@ -154,15 +167,15 @@ class RefineResult:
     ``calibrations`` maps camera names (rig order) to refined calibrations
     (``time_offset_s`` included); ``cameras`` the per-camera report;
     ``refusals`` why the result must not be written (empty: it may);
-    ``notes`` other findings (confounding); ``scale_px`` the robust residual
-    scale after refinement.
+    ``notes`` other findings (confounding); ``sigma_px`` the detection noise
+    (per pixel coordinate) the uncertainties are scaled by.
     """
 
     calibrations: Dict[str, CameraCalibration]
     cameras: List[CameraRefinement]
     flights: int
     points: int
-    scale_px: float
+    sigma_px: float
     refusals: List[str] = field(default_factory=list)
     notes: List[str] = field(default_factory=list)
 
@@ -795,12 +808,6 @@ def _project(world, rotation, centre, matrix, camera: Camera, *, jacobian: bool 
     if not jacobian:
         return pixels, None
     return pixels, np.asarray(d_t, dtype=float).reshape(-1, 2, 3)
-
-
-def _robust_scale(residuals: np.ndarray) -> float:
-    if not len(residuals):
-        return _MIN_SCALE_PX
-    return max(1.4826 * float(np.median(np.abs(residuals))), _MIN_SCALE_PX)
 
 
 def _soft_l1_weights(residuals: np.ndarray, scale_px: float) -> np.ndarray:

@@ -148,7 +148,7 @@ def run(args) -> int:
                                   for name in cameras}, max_gap_s=args.max_gap_s)
     _print(result, before, after, args)
     if result.refusals:
-        raise CalibrationFitError('refine: not written: ' + '; '.join(result.refusals))
+        raise CalibrationFitError('not written: ' + '; '.join(result.refusals))
     Path(args.out_dir).mkdir(parents=True, exist_ok=True)
     for name, path in outputs.items():
         save_calibration(result.calibrations[name], path)
@@ -160,7 +160,7 @@ def _print(result, before, after, args) -> None:
     gauge = ('world kept by priors' if args.keep_world
              else 'first camera fixed, scale by the baseline of the first two')
     print(f'refine: {result.flights} flights, {result.points} ball positions; {gauge}; '
-          f'residual sigma {result.scale_px:.3f} px')
+          f'detection noise {result.sigma_px:.3f} px')
     print('epipolar consistency, median [px] (before -> after):')
     for (a, b), (median, count) in before.items():
         print(f'  {a} / {b}: {median:.2f} -> {after[(a, b)][0]:.2f}  ({count} detections)')

@@ -141,6 +141,3 @@ def _print(result) -> None:
         print(f'  pair {pair.camera_a} -> {pair.camera_b}: {pair.offset_s * 1e3:+.3f} '
               f'+- {pair.uncertainty_s * 1e3:.3f} ms ({pair.samples} samples, '
               f'{pair.crossing:.0%} of the image motion crosses the epipolar lines)')
-    for name, notes in result.notes.items():
-        for note in notes:
-            print(f'note: {name}: {note}')

@@ -385,7 +385,6 @@ class FuserNode(Node):
         values['new sessions (time jumped or paused)'] = self.node_stats['sessions']
         values[f'other publishers of {self._position_pub.topic_name}'] = \
             self.position_watch.others
-        values.update(self._offset_values())
         inputs = sum(self._inputs.values())
         if inputs and not estimates:
             level, message = 'warn', 'receiving image points but no estimates yet'
@@ -396,10 +395,10 @@ class FuserNode(Node):
         status = diagnostic_status(f'{self.get_name()}: pseudo stereo fuser', level, message,
                                    values)
         self._diagnostics_pub.publish(
-            diagnostic_array(self.get_clock().now().nanoseconds, [status]))
+            diagnostic_array(self.get_clock().now().nanoseconds, [status, self._offset_status()]))
 
-    def _offset_values(self) -> dict:
-        """Return the /diagnostics entries of the time offsets (applied and estimated)."""
+    def _offset_status(self):
+        """Return the /diagnostics status of the time offsets (applied and estimated)."""
         values = {}
         estimate = self.offset_estimator.latest if self.offset_estimator else None
         for name in self._names:
@@ -415,7 +414,14 @@ class FuserNode(Node):
             warnings = estimate.warnings.get(name)
             values[f'time offset {name} status'] = warnings[0] if warnings else (
                 'applied' if self.apply_estimates else 'ok (report only)')
-        return values
+        troubled = [name for name in self._names[1:]
+                    if estimate is not None and estimate.warnings.get(name)]
+        if troubled:
+            level, message = 'warn', f'offset not usable: {", ".join(troubled)}'
+        else:
+            level, message = 'ok', ', '.join(
+                f'{name} {self._applied_ns[name] / 1e6:+.3f} ms' for name in self._names)
+        return diagnostic_status(f'{self.get_name()} time offsets', level, message, values)
 
 
 def main(args=None) -> int:
