@@ -389,6 +389,30 @@ def _late(values):
     return [value for key, value in values.items() if 'late' in key]
 
 
+def _feed_and_report(context, namespace, points, overrides=()):
+    """
+    Feed ``points`` to a new fuser node; return it, the positions and its last full report.
+
+    The report is the fuser's /diagnostics values once it has counted every point.
+    """
+    name = f'fuser{next(_COUNTER)}'  # /diagnostics is global: a name of this test's own
+    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
+        Parameter('diagnostics_period_s', value=0.05), *overrides])
+    harness = Harness(context, namespace, fuser)
+    reports = []
+    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, points, received)
+        assert harness.spin_until(lambda: any(
+            r and r[1]['observations'] == len(points) for r in reports))
+    finally:
+        harness.close()
+    _, values = next(r for r in reports if r and r[1]['observations'] == len(points))
+    return fuser, received, values
+
+
 def test_fuser_publishes_diagnostics_and_the_trail_marker(context, namespace):
     cameras, _, observations = _observations()
     name = f'fuser{next(_COUNTER)}'  # /diagnostics is global: a name of this test's own
@@ -431,21 +455,7 @@ def test_fuser_counts_a_late_point_once_with_the_default_window(context, namespa
              if observations[i].camera == 'camera2' and observations[i + 1].camera == 'camera1')
     late = observations[k]
     arrival = observations[:k] + [observations[k + 1], late] + observations[k + 2:]
-    name = f'fuser{next(_COUNTER)}'
-    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
-        Parameter('diagnostics_period_s', value=0.05)])
-    harness = Harness(context, namespace, fuser)
-    reports = []
-    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
-    try:
-        received = _positions_subscription(harness)
-        _feed_points(harness, arrival, received)
-        assert harness.spin_until(lambda: any(
-            r and r[1]['observations'] == len(arrival) for r in reports))
-    finally:
-        harness.close()
-    _, values = next(r for r in reports if r and r[1]['observations'] == len(arrival))
+    fuser, received, values = _feed_and_report(context, namespace, arrival)
     assert fuser.buffer.window_ns == 0
     assert values['estimates'] + _drops(values) == len(arrival)  # not counted as a drop
     assert _late(values) == [1]  # and reported once
@@ -461,26 +471,12 @@ def test_fuser_counts_a_late_point_once_with_the_default_window(context, namespa
 
 def test_fuser_starts_a_new_session_when_a_replay_loops(context, namespace):
     cameras, _, observations = _observations()
-    name = f'fuser{next(_COUNTER)}'
-    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
-        Parameter('diagnostics_period_s', value=0.05)])
-    harness = Harness(context, namespace, fuser)
-    reports = []
-    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
     looped = observations + observations  # the bag played twice: stamps jump back
-    try:
-        received = _positions_subscription(harness)
-        _feed_points(harness, looped, received)
-        assert harness.spin_until(lambda: any(
-            r and r[1]['observations'] == len(looped) for r in reports))
-    finally:
-        harness.close()
+    _, received, values = _feed_and_report(context, namespace, looped)
     expected, _ = fuse(cameras, observations)
     assert [r[0] for r in received] == [e.stamp_ns for e in expected] * 2
     np.testing.assert_allclose([r[1:] for r in received],
                                [(e.x, e.y, e.z) for e in expected] * 2, rtol=0, atol=1e-9)
-    _, values = next(r for r in reports if r and r[1]['observations'] == len(looped))
     # A new session, not a second pass of late points; the timing statistics stay right.
     assert _late(values) == [0]
     assert values['new sessions (time jumped or paused)'] == 1
@@ -493,26 +489,12 @@ def test_fuser_node_drops_one_bad_stamp_without_a_new_session(context, namespace
     cameras, _, observations = _observations()
     k = len(observations) // 2
     faulty = observations[:k] + [observations[k]._replace(stamp_ns=0)] + observations[k:]
-    name = f'fuser{next(_COUNTER)}'
-    fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
-        Parameter('diagnostics_period_s', value=0.05), Parameter('image_margin', value=0.2),
-        Parameter('max_speed_mps', value=30.0),
+    fuser, received, values = _feed_and_report(context, namespace, faulty, [
+        Parameter('image_margin', value=0.2), Parameter('max_speed_mps', value=30.0),
         Parameter('workspace_min_m', value=[-5.0, -5.0, -1.0]),
         Parameter('workspace_max_m', value=[5.0, 5.0, 4.0])])
-    harness = Harness(context, namespace, fuser)
-    reports = []
-    harness.probe.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda msg: reports.append(_diagnostics(msg, name)), 10)
-    try:
-        received = _positions_subscription(harness)
-        _feed_points(harness, faulty, received)
-        assert harness.spin_until(lambda: any(
-            r and r[1]['observations'] == len(faulty) for r in reports))
-    finally:
-        harness.close()
     expected, _ = fuse(cameras, observations)
     assert [r[0] for r in received] == [e.stamp_ns for e in expected]
-    _, values = next(r for r in reports if r and r[1]['observations'] == len(faulty))
     assert values['dropped: stamp_outlier'] == 1
     assert values['estimates'] + _drops(values) == len(faulty)
     # The node's parameters reach the core.
