@@ -66,7 +66,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 import math
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -195,8 +195,10 @@ class _Block:
     recording: int
     raw_times: np.ndarray   # (M,) seconds from the recording's epoch, raw stamps
     pixels: np.ndarray      # (M, 2) raw pixels
-    knots: Optional[np.ndarray] = None       # (M', k) point indices (k = 1 for the reference)
-    used: Optional[np.ndarray] = None        # (M,) bool: detections that entered
+    # (M', k) point indices (k = 1 for the reference; none before the first assignment)
+    knots: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=int))
+    # (M,) bool: detections that entered (none before the first assignment)
+    used: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rejected: Optional[np.ndarray] = None    # (M,) bool: outliers left out
 
 
@@ -229,7 +231,9 @@ class _Linearization:
     #: Lower bandwidth of the point normal matrix: four consecutive positions of 3 values.
     BANDWIDTH = 11
 
-    def __init__(self, residuals, points, cameras, n_points):
+    def __init__(self, residuals: np.ndarray,
+                 points: List[Tuple[int, np.ndarray, np.ndarray]],
+                 cameras: Optional[np.ndarray], n_points: int):
         self.residuals = residuals
         self.points = points
         self.cameras = cameras
@@ -291,7 +295,7 @@ class _Linearization:
         return result
 
 
-_PLANS = {}
+_PLANS: Dict[Tuple[int, Tuple[int, ...], int], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 def _band_plan(index: np.ndarray, size: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -366,7 +370,8 @@ def _rotation(omega: np.ndarray, base: np.ndarray) -> np.ndarray:
 class _Problem:
     """Parameter layout, residuals and sparsity of one bundle adjustment."""
 
-    def __init__(self, cameras: Sequence[Camera], recordings, offsets: Dict[str, float], *,
+    def __init__(self, cameras: Sequence[Camera], recordings: Sequence[Sequence[Observation]],
+                 offsets: Dict[str, float], *,
                  focal: bool, estimate_offsets: bool, keep_world: bool,
                  baseline_m: Optional[float], prior_rad: float, prior_m: float,
                  max_gap_s: float):
@@ -387,7 +392,11 @@ class _Problem:
             initial = self._initial_points(observations, ref_stamps)
             times = (ref_stamps - epoch).astype(float) / NS_PER_S + offsets[ref.name]
             cuts = np.nonzero(np.diff(times) > max_gap_s)[0] + 1
-            keep, first, last, starts, ends = [], [], [], [], []
+            keep: List[np.ndarray] = []
+            first: List[int] = []
+            last: List[int] = []
+            starts: List[float] = []
+            ends: List[float] = []
             for chunk in np.split(np.arange(len(times)), cuts):
                 good = np.all(np.isfinite(initial[chunk]), axis=1)
                 if len(chunk) < _MIN_FLIGHT_FRAMES or good.sum() < 2:
@@ -396,7 +405,7 @@ class _Problem:
                 for axis in range(3):  # fill detections no other camera saw, along the flight
                     initial[chunk, axis] = np.interp(index, index[good],
                                                      initial[chunk[good], axis])
-                kept_so_far = count + sum(len(k) for k in keep)
+                kept_so_far = count + sum(len(chunk_) for chunk_ in keep)
                 first.append(kept_so_far)
                 last.append(kept_so_far + len(chunk) - 1)
                 keep.append(chunk)
@@ -454,7 +463,8 @@ class _Problem:
         self.jerk_coefficients = np.vstack(coefficients) if coefficients else np.zeros((0, 4))
         self.jerk_sigma = np.maximum(np.concatenate(sigma), 1e-9) if sigma else np.zeros(0)
 
-    def _initial_points(self, observations, ref_stamps) -> np.ndarray:
+    def _initial_points(self, observations: Sequence[Observation],
+                        ref_stamps: np.ndarray) -> np.ndarray:
         """Triangulate the reference camera with the first other camera that sees the ball."""
         shifted = apply_time_offsets(observations, self.offsets0)
         query = ref_stamps + seconds_to_ns(self.offsets0[self.cameras[0].name])
@@ -475,11 +485,11 @@ class _Problem:
         self.slices: List[Dict[str, slice]] = []
         position = 3 * self.n_points
         ref_centre = self.cameras[0].center
-        self.baseline = None
+        self.baseline = 0.0
         for k, camera in enumerate(self.cameras):
             parts = {}
 
-            def take(name, size):
+            def take(name: str, size: int) -> None:
                 nonlocal position
                 parts[name] = slice(position, position + size)
                 position += size
@@ -573,7 +583,7 @@ class _Problem:
         return np.concatenate([f.times for f in self.flights]) if self.flights else np.zeros(0)
 
     def evaluate(self, x: np.ndarray, *, scale_px: float = 1.0, priors: bool = True,
-                 jacobian: bool = False, cameras: bool = True):
+                 jacobian: bool = False, cameras: bool = True) -> Any:
         """
         Return the residuals, or their linearization when ``jacobian`` is true.
 
@@ -589,7 +599,9 @@ class _Problem:
         times = self._times()
         states = [self.camera_state(x, k) for k in range(len(self.cameras))]
         n_theta = self.n_params - 3 * self.n_points
-        parts, point_blocks, camera_rows = [], [], []
+        parts: List[np.ndarray] = []
+        point_blocks: List[Tuple[int, np.ndarray, np.ndarray]] = []
+        camera_rows: List[np.ndarray] = []
         row = 0
         for block in self.blocks:
             rotation, centre, matrix, offset = states[block.camera]
@@ -661,14 +673,16 @@ class _Problem:
                            else None)
         return _Linearization(residuals, point_blocks, camera_jacobian, self.n_points)
 
-    def _camera_jacobian(self, x, block, camera, state, world, d_camera, d_world, index, times,
-                         derivative) -> None:
+    def _camera_jacobian(self, x: np.ndarray, block: _Block, camera: Camera,
+                         state: Tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                         world: np.ndarray, d_camera: np.ndarray, d_world: np.ndarray,
+                         index: np.ndarray, times: np.ndarray, derivative: np.ndarray) -> None:
         """Fill d residuals / d camera parameters (M, 2, n_theta) of one block."""
         rotation, centre, matrix, offset = state
         parts = self.slices[block.camera]
         first = 3 * self.n_points
 
-        def add(part_slice, value):  # value (M, 2, n)
+        def add(part_slice: slice, value: np.ndarray) -> None:  # value (M, 2, n)
             derivative[:, :, part_slice.start - first:part_slice.stop - first] = value
 
         if 'rotation' in parts:
@@ -699,7 +713,9 @@ class _Problem:
             add(parts['offset'], np.einsum('mij,mj->mi', d_world, velocity)[:, :, None])
 
     @staticmethod
-    def _focal_derivative(world, state, camera) -> np.ndarray:
+    def _focal_derivative(world: np.ndarray,
+                          state: Tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                          camera: Camera) -> np.ndarray:
         """Return d pixels / d (relative focal change), (M, 2), by a central difference."""
         rotation, centre, matrix, _ = state
         step = 1e-6
@@ -754,15 +770,16 @@ class _Problem:
         because the ball positions absorb the component along the epipolar
         lines too: half of the components are near zero.
         """
-        norms = [values for camera, values in self.per_camera(x).items() if camera]
-        norms = np.concatenate(norms) if norms else np.zeros(0)
+        tracks = [values for camera, values in self.per_camera(x).items() if camera]
+        norms = np.concatenate(tracks) if tracks else np.zeros(0)
         return max(1.4826 * float(np.median(norms)), _MIN_SCALE_PX) if len(norms) \
             else _MIN_SCALE_PX
 
     def per_camera(self, x: np.ndarray) -> Dict[int, np.ndarray]:
         """Return camera index -> (M,) reprojection error norms [px] of its detections."""
         residuals = self.residuals(x, priors=False)
-        result, position = {}, 0
+        result: Dict[int, np.ndarray] = {}
+        position = 0
         for block in self.blocks:
             count = 2 * int(block.used.sum())
             norms = np.hypot(*residuals[position:position + count].reshape(-1, 2).T)
@@ -787,7 +804,8 @@ def _lagrange_derivative(s: np.ndarray, knots_t: np.ndarray) -> np.ndarray:
     return derivative
 
 
-def _project(world, rotation, centre, matrix, camera: Camera, *, jacobian: bool = False):
+def _project(world: np.ndarray, rotation: np.ndarray, centre: np.ndarray, matrix: np.ndarray,
+             camera: Camera, *, jacobian: bool = False) -> Tuple[np.ndarray, Any]:
     """
     Project world points (M, 3) with a pose and camera matrix (the camera's distortion).
 
@@ -834,7 +852,7 @@ class _Solver:
         self.n_point = 3 * problem.n_points
         self.x = x.copy()
         self.scale_px = scale_px
-        self._cache = {}
+        self._cache: Dict[bytes, Tuple[np.ndarray, _Linearization]] = {}
         self._damping = _POINT_DAMPING
 
     def solve_points(self, theta: np.ndarray) -> Tuple[np.ndarray, _Linearization]:
@@ -898,12 +916,13 @@ class _Solver:
     def jac(self, theta: np.ndarray) -> np.ndarray:
         """Return the reduced Jacobian d residuals / d theta (dense, rows x parameters)."""
         linear = self.solve_points(theta)[1]
+        assert linear.cameras is not None  # solve_points linearizes the cameras too
         weights = _soft_l1_weights(linear.residuals, self.scale_px)
         moves = -_solve_band(linear.normal(weights, 1e-9),
                              linear.points_transpose(weights, linear.cameras))
         return linear.cameras + linear.points_times(moves)
 
-    def run(self) -> Tuple[np.ndarray, object]:
+    def run(self) -> Tuple[np.ndarray, Any]:
         """Solve; return the full parameter vector and scipy's result."""
         theta0 = self.x[self.n_point:]
         result = least_squares(self.fun, theta0, jac=self.jac, method='trf', loss=self._loss,
@@ -1042,17 +1061,18 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     x = _Solver(problem, x, problem.scale(x)).solve_points(x[n_point:])[0]
     before = problem.per_camera(x)
     sigma_px = _detection_noise(problem)
-    bounds = {'min_flights': min_flights, 'max_sigma_deg': max_sigma_deg,
-              'max_sigma_m': max_sigma_m, 'max_sigma_s': max_sigma_s,
-              'max_sigma_focal': max_sigma_focal}
+    bounds: Dict[str, float] = {'min_flights': min_flights, 'max_sigma_deg': max_sigma_deg,
+                                'max_sigma_m': max_sigma_m, 'max_sigma_s': max_sigma_s,
+                                'max_sigma_focal': max_sigma_focal}
 
     # Flights that leave a parameter undetermined by far (ten times its bound, judged at the
     # given calibration: the geometry, not the error, decides) are refused without a search
     # through the flat directions of the cost.
     covariance = _relative_covariance(problem, x, sigma_px)
     early = _report(problem, x, before, before, covariance, sigma_px, converged=True,
-                    early=True, **{key: value * (_EARLY_FACTOR if key.startswith('max') else 1)
-                                   for key, value in bounds.items()})
+                    early=True, bounds={key: value * (_EARLY_FACTOR if key.startswith('max')
+                                                      else 1)
+                                        for key, value in bounds.items()})
     if any('not determined' in reason for reason in early.refusals):
         return early
 
@@ -1061,13 +1081,9 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
         # Each round: solve, then re-assign the knots (the offsets moved), re-scale the loss and
         # leave out outliers (a cubic across a bounce), until nothing changes.
         x, result = _Solver(problem, x, problem.scale(x)).run()
-        previous = [(None if b.knots is None else b.knots.copy(), b.used.copy())
-                    for b in problem.blocks]
+        previous = [(b.knots.copy(), b.used.copy()) for b in problem.blocks]
         problem.reject(x)
-        if all(np.array_equal(used, b.used) and (
-                (knots is None and b.knots is None)
-                or (knots is not None and b.knots is not None
-                    and np.array_equal(knots, b.knots)))
+        if all(np.array_equal(used, b.used) and np.array_equal(knots, b.knots)
                for (knots, used), b in zip(previous, problem.blocks)):
             break
     else:
@@ -1075,12 +1091,17 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     after = problem.per_camera(x)
     covariance = _relative_covariance(problem, x, sigma_px)
     return _report(problem, x, before, after, covariance, sigma_px,
-                   converged=result.status > 0, message=result.message, **bounds)
+                   converged=result.status > 0, message=result.message, bounds=bounds)
 
 
-def _report(problem: _Problem, x, before, after, covariance, scale, *, converged: bool,
-            message: str = '', early: bool = False, min_flights, max_sigma_deg, max_sigma_m,
-            max_sigma_s, max_sigma_focal) -> RefineResult:
+def _report(problem: _Problem, x: np.ndarray, before: Dict[int, np.ndarray],
+            after: Dict[int, np.ndarray], covariance: np.ndarray, scale: float, *,
+            converged: bool, bounds: Mapping[str, float], message: str = '',
+            early: bool = False) -> RefineResult:
+    """Judge a solution against ``bounds`` (min_flights, max_sigma_*); build the result."""
+    min_flights = bounds['min_flights']
+    max_sigma_deg, max_sigma_m = bounds['max_sigma_deg'], bounds['max_sigma_m']
+    max_sigma_s, max_sigma_focal = bounds['max_sigma_s'], bounds['max_sigma_focal']
     n_point = 3 * problem.n_points
     flights = sum(len(f.first) for f in problem.flights)
     refusals, notes = [], []
@@ -1154,11 +1175,11 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
-def _median(values) -> float:
+def _median(values: Optional[np.ndarray]) -> float:
     return float(np.median(values)) if values is not None and len(values) else math.nan
 
 
-def _direction_sigma(problem: _Problem, x, k, covariance) -> float:
+def _direction_sigma(problem: _Problem, x: np.ndarray, k: int, covariance: np.ndarray) -> float:
     """Propagate the 2-parameter direction's covariance to the centre's largest sigma [m]."""
     part = problem.slices[k]['direction']
     base = problem.camera_state(x, k)[1]
@@ -1171,7 +1192,7 @@ def _direction_sigma(problem: _Problem, x, k, covariance) -> float:
     return math.sqrt(float(np.max(np.diag(centre))))
 
 
-def _offset_correlation(covariance, parts, n_point) -> float:
+def _offset_correlation(covariance: np.ndarray, parts: Dict[str, slice], n_point: int) -> float:
     """Return the largest |correlation| of a camera's offset with its pose parameters."""
     offset = parts['offset'].start - n_point
     others = [c - n_point for name in ('rotation', 'centre', 'direction') if name in parts
@@ -1207,7 +1228,7 @@ def epipolar_consistency(cameras: Sequence[Camera], recordings: Sequence[Sequenc
     :return: (name a, name b) -> (median [px], compared detections); NaN median without any
     """
     cameras = list(cameras)
-    distances = {}
+    distances: Dict[Tuple[str, str], List[np.ndarray]] = {}
     for observations in recordings:
         shifted = apply_time_offsets(observations, offsets_s)
         tracks = {}

@@ -32,8 +32,8 @@ from pathlib import Path
 import sys
 
 from . import UsageError
-from .common import (add_camera_argument, add_recording_arguments, cameras_from_args,
-                     read_recordings)
+from .common import (add_camera_argument, add_recording_arguments, camera_files,
+                     cameras_from_args, read_recordings)
 from ..calibrate.refine import (DEFAULT_MAX_SIGMA_DEG, DEFAULT_MAX_SIGMA_FOCAL,
                                 DEFAULT_MAX_SIGMA_M, DEFAULT_MAX_SIGMA_S, DEFAULT_MIN_FLIGHTS,
                                 DEFAULT_PRIOR_DEG, DEFAULT_PRIOR_M, epipolar_consistency,
@@ -102,10 +102,7 @@ def _outputs(args, cameras) -> dict:
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UsageError(f'--out-dir {out_dir}: exists and is not a directory')
-    inputs = {}
-    for value in args.camera:
-        name, _, path = value.partition('=')
-        inputs[name.strip()] = Path(path.strip())
+    inputs = {name: Path(path) for name, path in camera_files(args.camera).items()}
     outputs: dict[str, Path] = {}
     for name in cameras:
         target = out_dir / inputs[name].name
