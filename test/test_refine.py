@@ -23,6 +23,15 @@ degree; the scale comes from the baseline, which the flights cannot give (a rig 
 camera1 explains them as well), so the true baseline is given where 3D errors are compared.
 A straight flight repeated is degenerate (points on one line do not fix the relative pose):
 refine must refuse it.
+
+With 0.3 px noise the bar is a question of how much the flights say about camera2's rotation:
+the estimate is unbiased (noiseless flights give the truth exactly, noisy ones an error its
+1-sigma covers), and the 3D error a rotation error adds (about angle x distance) competes
+with the error the same noise gives the true calibration, so the ratio of the two does not
+depend on the noise level, only on how many detections, and how spread over the image.
+Measured (tools/time_offset_report.py refine): the 6.6 s of the four scenarios at 30 fps
+leave 0.15-0.2 deg (refine refuses); the bar needs about 0.025 deg, which random throws
+across the view reach in about 30 s at 168 fps (40 throws), or about a minute at 30 fps.
 """
 
 import numpy as np
@@ -31,7 +40,7 @@ from pseudo_stereo_ros.calibration import load_calibration, save_calibration
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main
 from pseudo_stereo_ros.evaluation.time_offsets import (event_errors_mm, perturbed_calibration,
-                                                       simulate_flights)
+                                                       random_throws, simulate_flights)
 from pseudo_stereo_ros.formats.csv_io import write_observations
 from pseudo_stereo_ros.fusion import fuse
 from pseudo_stereo_ros.offsets import apply_time_offsets
@@ -153,3 +162,56 @@ def test_refine_command_writes_new_files_and_refuses_to_overwrite(rig, tmp_path,
     written = load_calibration(tmp_path / 'out' / 'camera2.yaml')
     assert abs(written.time_offset_s - OFFSET_S) < 0.5e-3
     assert _angle_deg(written.rotation, cameras[1].R) < 0.1
+
+
+def test_refine_meets_the_3d_bar_with_enough_throws():
+    # The issue's bar with noise, where the flights carry enough: 168 fps, 40 random throws
+    # across the view (32 s), 0.3 px noise, camera2 1 deg and 2 cm off, its offset -8 ms and
+    # estimated, the true baseline given (flights cannot give the scale).
+    cameras = default_rig()
+    bad = Camera(perturbed_calibration(cameras[1].calibration, degrees=1.0, metres=0.02,
+                                       seed=0), name='camera2')
+    recording = simulate_flights(cameras, offsets_s={'camera2': OFFSET_S}, fps=168.0,
+                                 noise_px=0.3, seed=0, scenarios=random_throws(40, seed=0))
+    baseline = float(np.linalg.norm(cameras[1].center - cameras[0].center))
+    result = refine_rig([cameras[0], bad], [recording.observations], baseline_m=baseline)
+    assert result.ok, result.refusals
+    new = [Camera(result.calibrations[c.name], name=c.name) for c in cameras]
+    offsets = {name: c.time_offset_s for name, c in result.calibrations.items()}
+    report = result.cameras[1]
+    # The errors are within what the stated uncertainties allow.
+    assert _angle_deg(new[1].R, cameras[1].R) < 3 * report.sigma_rotation_deg
+    assert abs(offsets['camera2'] - OFFSET_S) < 3 * report.sigma_offset_s
+    # Epipolar consistency back to the noise level: that of the true rig.
+    before = epipolar_consistency([cameras[0], bad], [recording.observations], {})
+    after = epipolar_consistency(new, [recording.observations], offsets)
+    true = epipolar_consistency(cameras, [recording.observations], recording.offsets_s)
+    assert before['camera1', 'camera2'][0] > 4 * true['camera1', 'camera2'][0]
+    assert after['camera1', 'camera2'][0] < 1.05 * true['camera1', 'camera2'][0]
+    # The paper method's 3D error within 10% of the true calibration's.
+    true_error = _error_mm(cameras, recording, recording.offsets_s)
+    assert _error_mm([cameras[0], bad], recording, {}) > 3 * true_error
+    assert _error_mm(new, recording, offsets) < 1.1 * true_error
+
+
+def test_with_a_few_seconds_of_flights_the_rotation_is_uncertain_and_refine_says_so():
+    # 6.6 s of the four scenarios at 30 fps with 0.3 px noise: the rotation is determined to
+    # ~0.2 deg only (not a bias: the error stays within the stated uncertainty), so refine
+    # refuses; forced, its error is what that uncertainty predicts.
+    cameras = default_rig()
+    bad = Camera(perturbed_calibration(cameras[1].calibration, degrees=1.0, metres=0.02,
+                                       seed=1), name='camera2')
+    recording = simulate_flights(cameras, offsets_s={'camera2': OFFSET_S}, fps=30.0,
+                                 noise_px=0.3, seed=1, scenarios=SCENARIOS)
+    baseline = float(np.linalg.norm(cameras[1].center - cameras[0].center))
+    refused = refine_rig([cameras[0], bad], [recording.observations], baseline_m=baseline)
+    assert any(reason.startswith('camera2: rotation not determined by these flights')
+               for reason in refused.refusals), refused.refusals
+    forced = refine_rig([cameras[0], bad], [recording.observations], baseline_m=baseline,
+                        max_sigma_deg=np.inf, max_sigma_m=np.inf, max_sigma_s=np.inf)
+    assert forced.ok, forced.refusals
+    report = forced.cameras[1]
+    assert 0.1 < report.sigma_rotation_deg < 0.5
+    error = _angle_deg(forced.calibrations['camera2'].rotation, cameras[1].R)
+    assert error < 3 * report.sigma_rotation_deg
+    assert error < 0.5  # from 1 deg: the flights do correct most of it
