@@ -23,7 +23,12 @@ Bundle adjustment over recorded flights, robust (soft-L1) least squares with
   rotation (a rotation vector applied to the given R) and optical centre
   [m]; with ``focal`` a relative change of its focal lengths (fx and fy
   together, so the aspect ratio stays); with ``estimate_offsets`` its time
-  offset [s].  The reference camera's offset is the time gauge and stays.
+  offset [s].  The reference camera's offset is the time gauge and stays,
+  and so does its focal length: two cameras whose optical axes meet (a rig
+  aimed at one volume) cannot tell both focal lengths from the epipolar
+  geometry (the Bougnoux / Newsam degeneracy; freed, the default rig's came
+  out with 1-sigma ~10, i.e. 1000%), while one focal length relative to a
+  known one is determined.
 - **Residuals.** Reprojection errors [raw px, with the lens distortion] of
   every detection: the reference camera's against its own ball positions,
   every other camera's against the ball interpolated to its common-clock
@@ -500,7 +505,7 @@ class _Problem:
                     take('direction', 2)
                 else:
                     take('centre', 3)
-            if focal:
+            if focal and k > 0:  # the reference focal length is held (see the docstring)
                 take('focal', 1)
             if estimate_offsets and k > 0:
                 take('offset', 1)
@@ -1021,7 +1026,9 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     :param recordings: one or more recordings of observations with raw stamps
     :param offsets_s: the given offsets [s] (default: the calibrations')
     :param estimate_offsets: refine every offset but the reference's (else keep them)
-    :param focal: refine each camera's focal lengths (fx, fy by one factor)
+    :param focal: refine the focal lengths (fx, fy by one factor) of every camera but the
+        reference, whose focal length is held (with two converging cameras both are not
+        determined)
     :param keep_world: free every pose, held near the given one by priors (else: the
         reference pose fixed, the scale by the baseline of the first two cameras)
     :param baseline_m: the baseline of the first two cameras [m] (default: the given one)
