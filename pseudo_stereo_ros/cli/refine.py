@@ -58,7 +58,7 @@ def add_arguments(parser) -> None:
                         help='directory for the refined calibration files (same file names as '
                              'the inputs; never an input)')
     parser.add_argument('--focal', action='store_true',
-                        help="also refine the focal lengths (fx and fy by one factor) of every "
+                        help='also refine the focal lengths (fx and fy by one factor) of every '
                              "camera but the first, relative to the first camera's (held)")
     parser.add_argument('--fixed-offsets', action='store_true',
                         help='keep the time offsets of the calibration files')
