@@ -217,6 +217,23 @@ def test_with_a_few_seconds_of_flights_the_rotation_is_uncertain_and_refine_says
     error = _angle_deg(forced.calibrations['camera2'].rotation, cameras[1].R)
     assert error < 3 * report.sigma_rotation_deg
     assert error < 0.5  # from 1 deg: the flights do correct most of it
+    # What that means in 3D (sigma_position_m): about the rotation's sigma times the flights'
+    # distance (3-5 m), and it covers how far the refined calibration moves the estimates
+    # from the true calibration's.
+    distance = float(np.median(np.linalg.norm(recording.truth_points - cameras[1].center,
+                                              axis=1)))
+    predicted = np.radians(report.sigma_rotation_deg) * distance
+    assert 0.3 * predicted < forced.sigma_position_m < 3 * predicted
+    refined = [Camera(forced.calibrations[c.name], name=c.name) for c in cameras]
+    offsets = {name: c.time_offset_s for name, c in forced.calibrations.items()}
+    estimates = [{(e.camera, e.stamp_ns): (e.x, e.y, e.z) for e in fuse(
+        rig, apply_time_offsets(recording.observations, applied))[0]}
+        for rig, applied in ((cameras, recording.offsets_s), (refined, offsets))]
+    common = sorted(set(estimates[0]) & set(estimates[1]))
+    moved = np.linalg.norm(np.array([estimates[0][k] for k in common])
+                           - np.array([estimates[1][k] for k in common]), axis=1)
+    assert len(common) > 100
+    assert np.sqrt(np.mean(moved ** 2)) < 3 * forced.sigma_position_m
 
 
 @pytest.mark.parametrize('factor', [1.02, 0.98])

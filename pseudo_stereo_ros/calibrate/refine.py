@@ -173,7 +173,10 @@ class RefineResult:
     (``time_offset_s`` included); ``cameras`` the per-camera report;
     ``refusals`` why the result must not be written (empty: it may);
     ``notes`` other findings (confounding); ``sigma_px`` the detection noise
-    (per pixel coordinate) the uncertainties are scaled by.
+    (per pixel coordinate) the uncertainties are scaled by; ``sigma_position_m``
+    the rms 1-sigma displacement [m] of the flights' ball positions by the
+    uncertainty of the refined camera parameters: the 3D error the refined
+    calibration adds (with ``keep_world``: by the rig's relative geometry).
     """
 
     calibrations: Dict[str, CameraCalibration]
@@ -183,6 +186,7 @@ class RefineResult:
     sigma_px: float
     refusals: List[str] = field(default_factory=list)
     notes: List[str] = field(default_factory=list)
+    sigma_position_m: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -918,13 +922,23 @@ class _Solver:
         """Return the residuals at the best positions for theta."""
         return self.solve_points(theta)[1].residuals
 
-    def jac(self, theta: np.ndarray) -> np.ndarray:
-        """Return the reduced Jacobian d residuals / d theta (dense, rows x parameters)."""
+    def point_moves(self, theta: np.ndarray) -> Tuple[_Linearization, np.ndarray]:
+        """
+        Return the linearization at theta and d ball positions / d theta (3N, parameters).
+
+        The implicit function theorem: the positions stay optimal as theta moves.
+        """
         linear = self.solve_points(theta)[1]
         assert linear.cameras is not None  # solve_points linearizes the cameras too
         weights = _soft_l1_weights(linear.residuals, self.scale_px)
         moves = -_solve_band(linear.normal(weights, 1e-9),
                              linear.points_transpose(weights, linear.cameras))
+        return linear, moves
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        """Return the reduced Jacobian d residuals / d theta (dense, rows x parameters)."""
+        linear, moves = self.point_moves(theta)
+        assert linear.cameras is not None
         return linear.cameras + linear.points_times(moves)
 
     def run(self) -> Tuple[np.ndarray, Any]:
@@ -967,7 +981,8 @@ def _detection_noise(problem: _Problem) -> float:
     return max(1.4826 * float(np.median(np.abs(values))) / math.sqrt(20.0), _MIN_SCALE_PX)
 
 
-def _relative_covariance(problem: _Problem, x: np.ndarray, sigma_px: float) -> np.ndarray:
+def _relative_covariance(problem: _Problem, x: np.ndarray,
+                         sigma_px: float) -> Tuple[np.ndarray, float]:
     """
     Return the covariance of the camera parameters that the flights must determine.
 
@@ -976,8 +991,25 @@ def _relative_covariance(problem: _Problem, x: np.ndarray, sigma_px: float) -> n
     explains the flights as well), so the uncertainty is judged for the rig's
     relative geometry: the first camera's pose and the baseline's length held,
     the priors left out.  The first camera's rotation and centre then get 0.
+
+    Also return what it means in 3D: the rms over the ball positions of their
+    1-sigma displacement [m] by the camera parameters' uncertainty (each
+    position moving with the parameters as the implicit function theorem
+    says): the error the calibration adds to later estimates at the flights'
+    distances.
     """
-    jacobian = _Solver(problem, x, problem.scale(x)).jac(x[3 * problem.n_points:])
+    linear, moves = _Solver(problem, x, problem.scale(x)).point_moves(x[3 * problem.n_points:])
+    assert linear.cameras is not None
+    jacobian = linear.cameras + linear.points_times(moves)
+    covariance = _relative_covariance_of(problem, x, jacobian, sigma_px)
+    per_point = moves.reshape(problem.n_points, 3, -1)
+    variance = np.einsum('pai,ij,paj->p', per_point, covariance, per_point)
+    return covariance, math.sqrt(max(float(np.mean(variance)), 0.0))
+
+
+def _relative_covariance_of(problem: _Problem, x: np.ndarray, jacobian: np.ndarray,
+                            sigma_px: float) -> np.ndarray:
+    """Return the covariance of :func:`_relative_covariance` from the reduced Jacobian."""
     if not problem.keep_world:
         return _camera_covariance(jacobian, sigma_px)
     first = 3 * problem.n_points
@@ -1075,8 +1107,9 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     # Flights that leave a parameter undetermined by far (ten times its bound, judged at the
     # given calibration: the geometry, not the error, decides) are refused without a search
     # through the flat directions of the cost.
-    covariance = _relative_covariance(problem, x, sigma_px)
-    early = _report(problem, x, before, before, covariance, sigma_px, converged=True,
+    covariance, sigma_position = _relative_covariance(problem, x, sigma_px)
+    early = _report(problem, x, before, before, covariance, sigma_px, sigma_position,
+                    converged=True,
                     early=True, bounds={key: value * (_EARLY_FACTOR if key.startswith('max')
                                                       else 1)
                                         for key, value in bounds.items()})
@@ -1096,13 +1129,14 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     else:
         x, result = _Solver(problem, x, problem.scale(x)).run()
     after = problem.per_camera(x)
-    covariance = _relative_covariance(problem, x, sigma_px)
-    return _report(problem, x, before, after, covariance, sigma_px,
+    covariance, sigma_position = _relative_covariance(problem, x, sigma_px)
+    return _report(problem, x, before, after, covariance, sigma_px, sigma_position,
                    converged=result.status > 0, message=result.message, bounds=bounds)
 
 
 def _report(problem: _Problem, x: np.ndarray, before: Dict[int, np.ndarray],
-            after: Dict[int, np.ndarray], covariance: np.ndarray, scale: float, *,
+            after: Dict[int, np.ndarray], covariance: np.ndarray, scale: float,
+            sigma_position: float, *,
             converged: bool, bounds: Mapping[str, float], message: str = '',
             early: bool = False) -> RefineResult:
     """Judge a solution against ``bounds`` (min_flights, max_sigma_*); build the result."""
@@ -1173,7 +1207,7 @@ def _report(problem: _Problem, x: np.ndarray, before: Dict[int, np.ndarray],
             camera.calibration, camera_matrix=_frozen(matrix), rotation=_frozen(rotation),
             translation=_frozen(-rotation @ centre), time_offset_s=float(offset))
     return RefineResult(calibrations, reports, flights, problem.n_points, scale, refusals,
-                        notes)
+                        notes, sigma_position)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
