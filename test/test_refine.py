@@ -29,7 +29,7 @@ the estimate is unbiased (noiseless flights give the truth exactly, noisy ones a
 1-sigma covers), and the 3D error a rotation error adds (about angle x distance) competes
 with the error the same noise gives the true calibration, so the ratio of the two does not
 depend on the noise level, only on how many detections, and how spread over the image.
-Measured (tools/time_offset_report.py refine): the 6.6 s of the four scenarios at 30 fps
+Measured (tools/time_offset_report.py throws): the 6.6 s of the four scenarios at 30 fps
 leave 0.15-0.2 deg (refine refuses); the bar needs about 0.025 deg, which random throws
 across the view reach in about 30 s at 168 fps (40 throws), or about a minute at 30 fps.
 """
@@ -41,8 +41,9 @@ from pseudo_stereo_ros.calibrate.refine import epipolar_consistency, refine_rig
 from pseudo_stereo_ros.calibration import load_calibration, save_calibration
 from pseudo_stereo_ros.camera import Camera
 from pseudo_stereo_ros.cli.main import main
-from pseudo_stereo_ros.evaluation.time_offsets import (event_errors_mm, perturbed_calibration,
-                                                       random_throws, simulate_flights)
+from pseudo_stereo_ros.evaluation.time_offsets import (ballistic_throw, event_errors_mm,
+                                                       perturbed_calibration, random_throws,
+                                                       simulate_flights, THROW_VOLUME_M)
 from pseudo_stereo_ros.formats.csv_io import write_observations
 from pseudo_stereo_ros.fusion import fuse
 from pseudo_stereo_ros.offsets import apply_time_offsets
@@ -160,6 +161,7 @@ def test_refine_command_writes_new_files_and_refuses_to_overwrite(rig, tmp_path,
     assert main(args + ['--out-dir', str(tmp_path / 'out')]) == 0
     out = capsys.readouterr().out
     assert 'camera1 / camera2' in out and 'wrote' in out
+    assert "the refined calibration's uncertainty moves the ball positions by" in out
     assert {p: p.read_bytes() for p in inputs.iterdir()} == before
     written = load_calibration(tmp_path / 'out' / 'camera2.yaml')
     assert abs(written.time_offset_s - OFFSET_S) < 0.5e-3
@@ -257,3 +259,21 @@ def test_focal_recovers_camera2s_focal_length_relative_to_camera1s(factor):
     assert abs(refined[1, 1] / cameras[1].K[1, 1] - 1.0) < 1e-3
     assert result.cameras[1].sigma_focal < 1e-3
     assert _angle_deg(result.calibrations['camera2'].rotation, cameras[1].R) < 0.02
+
+
+def test_throws_are_free_parabolas_the_rig_sees():
+    throw = ballistic_throw((0.0, 1.0, 0.5), (2.0, 3.0, 1.0), 0.8)
+    np.testing.assert_allclose(throw.position(np.array([0.0, 0.8])),
+                               [[0.0, 1.0, 0.5], [2.0, 3.0, 1.0]], atol=1e-12)
+    t = np.array([0.1, 0.3, 0.5])
+    h = 1e-3
+    acceleration = (throw.position(t + h) - 2 * throw.position(t) + throw.position(t - h)) / h**2
+    np.testing.assert_allclose(acceleration, [[0.0, 0.0, -9.8]] * 3, atol=1e-6)
+    throws = random_throws(40, seed=3)
+    low, high = (np.array(corner) for corner in THROW_VOLUME_M)
+    ends = np.array([t.position(np.array([0.0, t.duration_s])) for t in throws])
+    assert np.all(ends >= low) and np.all(ends <= high)
+    assert all(0.6 <= t.duration_s <= 1.0 for t in throws)
+    points = np.vstack([t.position(np.linspace(0.0, t.duration_s, 20)) for t in throws])
+    seen = np.all([c.in_image(c.project(points)) for c in default_rig()], axis=0)
+    assert seen.mean() > 0.95  # the arcs stay in view of both cameras

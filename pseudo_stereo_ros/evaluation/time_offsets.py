@@ -42,7 +42,7 @@ __all__ = ['FlightRecording', 'THROW_VOLUME_M', 'ballistic_throw', 'event_errors
            'perturbed_calibration', 'random_throws', 'simulate_flights', 'truth_at_stamps']
 
 #: The box [m] (x, y, z lows; x, y, z highs) where throws of the default rig start and end: both
-#: cameras see it (and the arcs above it) whole, from 2 to 6 m away.
+#: cameras see it whole, and nearly all of the arcs above it, from 2 to 6 m away.
 THROW_VOLUME_M = ((-0.5, 0.0, 0.0), (3.5, 4.0, 1.5))
 
 
