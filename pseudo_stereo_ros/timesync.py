@@ -67,7 +67,7 @@ from collections import deque
 from dataclasses import dataclass, field
 import math
 import threading
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Deque, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -344,13 +344,14 @@ def _median_at(problem: _PairProblem, d: float, minimum: int) -> Tuple[float, in
     return float(np.median(np.abs(residuals))), len(residuals)
 
 
-def _fit(problem: _PairProblem, d0: float, assignment, scale: float, keep=None) -> float:
+def _fit(problem: _PairProblem, d0: float, assignment: List[np.ndarray], scale: float,
+         keep: Optional[np.ndarray] = None) -> float:
     """Robust least squares of d from d0 with a fixed sample assignment (optionally a subset)."""
-    def fun(x):
+    def fun(x: np.ndarray) -> np.ndarray:
         r = problem.evaluate(x[0], assignment)[0]
         return r if keep is None else r[keep]
 
-    def jac(x):
+    def jac(x: np.ndarray) -> np.ndarray:
         j = problem.evaluate(x[0], assignment)[1]
         return (j if keep is None else j[keep])[:, None]
 
@@ -385,15 +386,12 @@ def estimate_pair_offset(camera_a: Camera, camera_b: Camera,
     half = max(problem.period, float(search_s)) if half_width_s is None else half_width_s
     step = min(problem.period / 12.0, half / 2.0)
     grid = center_s + np.arange(-half, half + 0.5 * step, step)
-    medians, counts = [], []
-    for d in grid:
-        median, count = _median_at(problem, float(d), 1)
-        medians.append(median)
-        counts.append(count)
-    counts = np.array(counts)
+    at_grid = [_median_at(problem, float(d), 1) for d in grid]
+    counts = np.array([count for _, count in at_grid])
     if counts.max(initial=0) < 2:
         return None
-    medians = np.where(counts >= 0.5 * counts.max(), np.array(medians), np.inf)
+    medians = np.where(counts >= 0.5 * counts.max(),
+                       np.array([median for median, _ in at_grid]), np.inf)
     d = float(grid[int(np.argmin(medians))])
     for _ in range(5):  # refit when d left the neighbourhood its assignment was made for
         assignment = problem.assign(d)
@@ -486,7 +484,7 @@ class OffsetEstimate:
 
 def _recording_tracks(cameras: Sequence[Camera], observations: Sequence[Observation],
                       max_gap_s: float) -> Dict[str, Optional[_Track]]:
-    rows = {camera.name: [] for camera in cameras}
+    rows: Dict[str, List[Tuple[int, float, float]]] = {camera.name: [] for camera in cameras}
     for obs in observations:
         if obs.camera in rows:
             rows[obs.camera].append((int(obs.stamp_ns), float(obs.u), float(obs.v)))
@@ -536,7 +534,7 @@ def estimate_time_offsets(cameras: Mapping[str, Camera] | Sequence[Camera],
         if result is not None:
             pairs.append(result)
     offsets, sigmas, closure_p = _combine(names, given, pairs)
-    warnings = {name: [] for name in names}
+    warnings: Dict[str, List[str]] = {name: [] for name in names}
     samples = dict.fromkeys(names, 0)
     by_pair = {(p.camera_a, p.camera_b): p for p in pairs}
     before, after = {}, {}
@@ -650,7 +648,8 @@ class OnlineOffsetEstimator:
         self.max_uncertainty_s = float(max_uncertainty_s)
         self.max_gap_s = float(max_gap_s)
         self._given = camera_time_offsets(self.cameras, offsets_s)
-        self._samples = {camera.name: deque(maxlen=int(max_samples)) for camera in self.cameras}
+        self._samples: Dict[str, Deque[Tuple[int, float, float]]] = {
+            camera.name: deque(maxlen=int(max_samples)) for camera in self.cameras}
         self._center = dict(self._given)
         self._settled = False
         self._lock = threading.Lock()

@@ -37,6 +37,7 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+import yaml
 
 _COUNTER = itertools.count()
 
@@ -144,3 +145,19 @@ def test_bad_offsets_parameter_stops_the_node(context, namespace, value, match):
     with pytest.raises(StartupError, match=match):
         FuserNode(context=context, namespace=namespace,
                   parameter_overrides=[Parameter('time_offsets_s', value=value)])
+
+
+def test_config_fuser_yaml_lists_every_parameter_and_starts_the_node(context, namespace,
+                                                                     repo_dir):
+    # config/fuser.yaml is the documented parameter set: every parameter the node declares is
+    # in it (with a comment), and its values start the node (types as declared).
+    document = yaml.safe_load((repo_dir / 'config' / 'fuser.yaml').read_text())
+    values = document['/**/fuser']['ros__parameters']
+    fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
+        Parameter(name, value=value) for name, value in values.items()])
+    try:
+        declared = set(fuser._parameters) - {'use_sim_time', 'start_type_description_service'}
+    finally:
+        fuser.destroy_node()
+    assert declared - set(values) == set(), 'declared but not in config/fuser.yaml'
+    assert set(values) - declared == set(), 'in config/fuser.yaml but not declared'

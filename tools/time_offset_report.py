@@ -17,6 +17,8 @@ Measure time-offset estimation and refinement (the README's figures; opt-in, min
 
     .venv/bin/python tools/time_offset_report.py sync      # offset sweep, paper method, online
     .venv/bin/python tools/time_offset_report.py refine    # perturbed rig, synthetic
+    .venv/bin/python tools/time_offset_report.py throws    # how many throws the 3D bar needs
+    .venv/bin/python tools/time_offset_report.py focal     # --focal, camera2's focal +-2%
     .venv/bin/python tools/time_offset_report.py real      # the table-tennis bags
 
 Synthetic recordings: the default rig, the scenarios spiral, bounce, straight
@@ -25,6 +27,7 @@ off by ``-offset`` (so ``time_offset_s = offset`` corrects them).
 """
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 import sys
 import time
@@ -39,7 +42,7 @@ from pseudo_stereo_ros.calibrate.refine import refine_rig  # noqa: E402
 from pseudo_stereo_ros.camera import Camera  # noqa: E402
 from pseudo_stereo_ros.evaluation.holdout import holdout  # noqa: E402
 from pseudo_stereo_ros.evaluation.time_offsets import (  # noqa: E402
-    event_errors_mm, perturbed_calibration, simulate_flights)
+    event_errors_mm, perturbed_calibration, random_throws, simulate_flights)
 from pseudo_stereo_ros.fusion import fuse  # noqa: E402
 from pseudo_stereo_ros.offsets import apply_time_offsets  # noqa: E402
 from pseudo_stereo_ros.rig import Rig  # noqa: E402
@@ -162,6 +165,94 @@ def refine_report(seeds: int) -> None:
                       f'{seconds:>5.0f}s {"yes" if result.refusals else "no":>8}')
 
 
+def _refine_case(cameras, bad, recording, **options):
+    """Refine camera2 with the true baseline; return (result, 3D error ratio, rot err, s)."""
+    baseline = float(np.linalg.norm(cameras[1].center - cameras[0].center))
+    start = time.perf_counter()
+    result = refine_rig([cameras[0], bad], [recording.observations], baseline_m=baseline,
+                        **options)
+    seconds = time.perf_counter() - start
+    refined = [Camera(result.calibrations[c.name], name=c.name) for c in cameras]
+    offsets = {name: c.time_offset_s for name, c in result.calibrations.items()}
+    errors = []
+    for rig, applied in ((cameras, recording.offsets_s), (refined, offsets)):
+        estimates, _ = fuse(rig, apply_time_offsets(recording.observations, applied))
+        errors.append(float(np.mean(event_errors_mm(recording, estimates, applied))))
+    rotation = result.calibrations['camera2'].rotation @ cameras[1].R.T
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1, 1))))
+    return result, errors[1] / errors[0], angle, seconds
+
+
+FORCED = {'max_sigma_deg': np.inf, 'max_sigma_m': np.inf, 'max_sigma_s': np.inf,
+          'max_sigma_focal': np.inf}
+
+
+def throws_report(seeds: int) -> None:
+    """How much flight the 3D bar (within 10% of the true calibration's) needs."""
+    cameras = default_rig()
+    print('refine with random throws across the view (random_throws: start and end in a box '
+          'both cameras see, 0.6-1 s each, 0.5 s pauses); camera2 rotated 1 deg and moved 2 cm, '
+          'offset +5 ms estimated, the true baseline given; forced (no refusal) to show the '
+          f'error; {seeds} seeds per row')
+    print(f'{"fps":>4} {"noise":>5} {"throws":>6} {"seconds":>7} '
+          f'{"3D refined/true: median":>24} {"max":>6} {"<= 1.1":>7} '
+          f'{"rot err [deg] median":>21} {"1 sigma median":>15} {"accepted":>9} {"s/run":>6}')
+    for fps, noise, count in ((30.0, 0.3, 10), (30.0, 0.3, 20), (30.0, 0.1, 20),
+                              (30.0, 0.3, 40), (30.0, 0.3, 80), (168.0, 0.3, 10),
+                              (168.0, 0.3, 20), (168.0, 0.3, 40)):
+        rows = []
+        for seed in range(seeds):
+            throws = random_throws(count, seed=100 + seed)
+            bad = Camera(perturbed_calibration(cameras[1].calibration, degrees=1.0,
+                                               metres=0.02, seed=seed), name='camera2')
+            recording = simulate_flights(cameras, offsets_s={'camera2': 0.005}, fps=fps,
+                                         noise_px=noise, seed=seed, scenarios=throws)
+            result, ratio, angle, seconds = _refine_case(cameras, bad, recording, **FORCED)
+            accepted = result.cameras[1].sigma_rotation_deg <= 0.1
+            rows.append((ratio, angle, result.cameras[1].sigma_rotation_deg, accepted,
+                         seconds, sum(t.duration_s for t in throws)))
+        a = np.array(rows, dtype=float)
+        print(f'{fps:>4.0f} {noise:>5.1f} {count:>6d} {np.mean(a[:, 5]):>7.0f} '
+              f'{np.median(a[:, 0]):>24.3f} {a[:, 0].max():>6.3f} {np.mean(a[:, 0] <= 1.1):>7.0%} '
+              f'{np.median(a[:, 1]):>21.3f} {np.median(a[:, 2]):>15.3f} '
+              f'{np.mean(a[:, 3]):>9.0%} {np.mean(a[:, 4]):>6.1f}')
+
+
+def focal_report() -> None:
+    """--focal: camera2's focal length off by +-2% (and its pose 1 deg, 2 cm)."""
+    cameras = default_rig()
+    print('refine --focal: camera2 focal x1.02 / x0.98 and (second block) also rotated 1 deg and '
+          "moved 2 cm; camera1's focal length held; true baseline; forced (no refusal)")
+    print(f'{"fps":>4} {"noise":>5} {"throws":>6} {"pose":>5} {"focal":>6} '
+          f'{"focal err [%]":>14} {"1 sigma [%]":>12} {"rot err [deg]":>14} '
+          f'{"3D refined/true":>16} {"refused by default":>19}')
+    for fps, noise, count in ((30.0, 0.0, 20), (30.0, 0.3, 20), (168.0, 0.3, 40)):
+        for pose in (False, True):
+            for seed, factor in enumerate((1.02, 0.98)):
+                calibration = cameras[1].calibration
+                if pose:
+                    calibration = perturbed_calibration(calibration, degrees=1.0,
+                                                        metres=0.02, seed=seed)
+                matrix = calibration.camera_matrix.copy()
+                matrix[0, 0] *= factor
+                matrix[1, 1] *= factor
+                bad = Camera(replace(calibration, camera_matrix=matrix), name='camera2')
+                recording = simulate_flights(cameras, offsets_s={'camera2': -0.008}, fps=fps,
+                                             noise_px=noise, seed=seed,
+                                             scenarios=random_throws(count, seed=seed))
+                result, ratio, angle, _ = _refine_case(cameras, bad, recording, focal=True,
+                                                       **FORCED)
+                default, _, _, _ = _refine_case(cameras, bad, recording, focal=True)
+                error = (result.calibrations['camera2'].camera_matrix[0, 0]
+                         / cameras[1].K[0, 0] - 1.0)
+                refused = '; '.join(r.split(':')[0] + ':' + r.split(':')[1][:24]
+                                    for r in default.refusals) or 'no'
+                print(f'{fps:>4.0f} {noise:>5.1f} {count:>6d} {"yes" if pose else "no":>5} '
+                      f'{factor:>6.2f} {error * 100:>+14.3f} '
+                      f'{result.cameras[1].sigma_focal * 100:>12.3f} {angle:>14.3f} '
+                      f'{ratio:>16.3f}  {refused}')
+
+
 def _epipolar(camera_a, camera_b, observations, offsets) -> float:
     shifted = apply_time_offsets(observations, offsets)
     tracks = {}
@@ -261,10 +352,11 @@ def real_report() -> None:
 def main() -> int:
     """Run the chosen report."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('report', choices=('sync', 'refine', 'real'))
+    parser.add_argument('report', choices=('sync', 'refine', 'throws', 'focal', 'real'))
     parser.add_argument('--seeds', type=int, default=3)
     args = parser.parse_args()
     {'sync': lambda: sync_report(args.seeds), 'refine': lambda: refine_report(args.seeds),
+     'throws': lambda: throws_report(args.seeds), 'focal': focal_report,
      'real': real_report}[args.report]()
     return 0
 

@@ -23,7 +23,12 @@ Bundle adjustment over recorded flights, robust (soft-L1) least squares with
   rotation (a rotation vector applied to the given R) and optical centre
   [m]; with ``focal`` a relative change of its focal lengths (fx and fy
   together, so the aspect ratio stays); with ``estimate_offsets`` its time
-  offset [s].  The reference camera's offset is the time gauge and stays.
+  offset [s].  The reference camera's offset is the time gauge and stays,
+  and so does its focal length: two cameras whose optical axes meet (a rig
+  aimed at one volume) cannot tell both focal lengths from the epipolar
+  geometry (the Bougnoux / Newsam degeneracy; freed, the default rig's came
+  out with 1-sigma ~10, i.e. 1000%), while one focal length relative to a
+  known one is determined.
 - **Residuals.** Reprojection errors [raw px, with the lens distortion] of
   every detection: the reference camera's against its own ball positions,
   every other camera's against the ball interpolated to its common-clock
@@ -66,7 +71,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 import math
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -168,7 +173,10 @@ class RefineResult:
     (``time_offset_s`` included); ``cameras`` the per-camera report;
     ``refusals`` why the result must not be written (empty: it may);
     ``notes`` other findings (confounding); ``sigma_px`` the detection noise
-    (per pixel coordinate) the uncertainties are scaled by.
+    (per pixel coordinate) the uncertainties are scaled by; ``sigma_position_m``
+    the rms 1-sigma displacement [m] of the flights' ball positions by the
+    uncertainty of the refined camera parameters: the 3D error the refined
+    calibration adds (with ``keep_world``: by the rig's relative geometry).
     """
 
     calibrations: Dict[str, CameraCalibration]
@@ -178,6 +186,7 @@ class RefineResult:
     sigma_px: float
     refusals: List[str] = field(default_factory=list)
     notes: List[str] = field(default_factory=list)
+    sigma_position_m: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -195,8 +204,10 @@ class _Block:
     recording: int
     raw_times: np.ndarray   # (M,) seconds from the recording's epoch, raw stamps
     pixels: np.ndarray      # (M, 2) raw pixels
-    knots: Optional[np.ndarray] = None       # (M', k) point indices (k = 1 for the reference)
-    used: Optional[np.ndarray] = None        # (M,) bool: detections that entered
+    # (M', k) point indices (k = 1 for the reference; none before the first assignment)
+    knots: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=int))
+    # (M,) bool: detections that entered (none before the first assignment)
+    used: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rejected: Optional[np.ndarray] = None    # (M,) bool: outliers left out
 
 
@@ -229,7 +240,9 @@ class _Linearization:
     #: Lower bandwidth of the point normal matrix: four consecutive positions of 3 values.
     BANDWIDTH = 11
 
-    def __init__(self, residuals, points, cameras, n_points):
+    def __init__(self, residuals: np.ndarray,
+                 points: List[Tuple[int, np.ndarray, np.ndarray]],
+                 cameras: Optional[np.ndarray], n_points: int):
         self.residuals = residuals
         self.points = points
         self.cameras = cameras
@@ -291,7 +304,7 @@ class _Linearization:
         return result
 
 
-_PLANS = {}
+_PLANS: Dict[Tuple[int, Tuple[int, ...], int], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 def _band_plan(index: np.ndarray, size: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -366,7 +379,8 @@ def _rotation(omega: np.ndarray, base: np.ndarray) -> np.ndarray:
 class _Problem:
     """Parameter layout, residuals and sparsity of one bundle adjustment."""
 
-    def __init__(self, cameras: Sequence[Camera], recordings, offsets: Dict[str, float], *,
+    def __init__(self, cameras: Sequence[Camera], recordings: Sequence[Sequence[Observation]],
+                 offsets: Dict[str, float], *,
                  focal: bool, estimate_offsets: bool, keep_world: bool,
                  baseline_m: Optional[float], prior_rad: float, prior_m: float,
                  max_gap_s: float):
@@ -387,7 +401,11 @@ class _Problem:
             initial = self._initial_points(observations, ref_stamps)
             times = (ref_stamps - epoch).astype(float) / NS_PER_S + offsets[ref.name]
             cuts = np.nonzero(np.diff(times) > max_gap_s)[0] + 1
-            keep, first, last, starts, ends = [], [], [], [], []
+            keep: List[np.ndarray] = []
+            first: List[int] = []
+            last: List[int] = []
+            starts: List[float] = []
+            ends: List[float] = []
             for chunk in np.split(np.arange(len(times)), cuts):
                 good = np.all(np.isfinite(initial[chunk]), axis=1)
                 if len(chunk) < _MIN_FLIGHT_FRAMES or good.sum() < 2:
@@ -396,7 +414,7 @@ class _Problem:
                 for axis in range(3):  # fill detections no other camera saw, along the flight
                     initial[chunk, axis] = np.interp(index, index[good],
                                                      initial[chunk[good], axis])
-                kept_so_far = count + sum(len(k) for k in keep)
+                kept_so_far = count + sum(len(chunk_) for chunk_ in keep)
                 first.append(kept_so_far)
                 last.append(kept_so_far + len(chunk) - 1)
                 keep.append(chunk)
@@ -454,7 +472,8 @@ class _Problem:
         self.jerk_coefficients = np.vstack(coefficients) if coefficients else np.zeros((0, 4))
         self.jerk_sigma = np.maximum(np.concatenate(sigma), 1e-9) if sigma else np.zeros(0)
 
-    def _initial_points(self, observations, ref_stamps) -> np.ndarray:
+    def _initial_points(self, observations: Sequence[Observation],
+                        ref_stamps: np.ndarray) -> np.ndarray:
         """Triangulate the reference camera with the first other camera that sees the ball."""
         shifted = apply_time_offsets(observations, self.offsets0)
         query = ref_stamps + seconds_to_ns(self.offsets0[self.cameras[0].name])
@@ -475,11 +494,11 @@ class _Problem:
         self.slices: List[Dict[str, slice]] = []
         position = 3 * self.n_points
         ref_centre = self.cameras[0].center
-        self.baseline = None
+        self.baseline = 0.0
         for k, camera in enumerate(self.cameras):
             parts = {}
 
-            def take(name, size):
+            def take(name: str, size: int) -> None:
                 nonlocal position
                 parts[name] = slice(position, position + size)
                 position += size
@@ -490,7 +509,7 @@ class _Problem:
                     take('direction', 2)
                 else:
                     take('centre', 3)
-            if focal:
+            if focal and k > 0:  # the reference focal length is held (see the docstring)
                 take('focal', 1)
             if estimate_offsets and k > 0:
                 take('offset', 1)
@@ -573,7 +592,7 @@ class _Problem:
         return np.concatenate([f.times for f in self.flights]) if self.flights else np.zeros(0)
 
     def evaluate(self, x: np.ndarray, *, scale_px: float = 1.0, priors: bool = True,
-                 jacobian: bool = False, cameras: bool = True):
+                 jacobian: bool = False, cameras: bool = True) -> Any:
         """
         Return the residuals, or their linearization when ``jacobian`` is true.
 
@@ -589,7 +608,9 @@ class _Problem:
         times = self._times()
         states = [self.camera_state(x, k) for k in range(len(self.cameras))]
         n_theta = self.n_params - 3 * self.n_points
-        parts, point_blocks, camera_rows = [], [], []
+        parts: List[np.ndarray] = []
+        point_blocks: List[Tuple[int, np.ndarray, np.ndarray]] = []
+        camera_rows: List[np.ndarray] = []
         row = 0
         for block in self.blocks:
             rotation, centre, matrix, offset = states[block.camera]
@@ -661,14 +682,16 @@ class _Problem:
                            else None)
         return _Linearization(residuals, point_blocks, camera_jacobian, self.n_points)
 
-    def _camera_jacobian(self, x, block, camera, state, world, d_camera, d_world, index, times,
-                         derivative) -> None:
+    def _camera_jacobian(self, x: np.ndarray, block: _Block, camera: Camera,
+                         state: Tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                         world: np.ndarray, d_camera: np.ndarray, d_world: np.ndarray,
+                         index: np.ndarray, times: np.ndarray, derivative: np.ndarray) -> None:
         """Fill d residuals / d camera parameters (M, 2, n_theta) of one block."""
         rotation, centre, matrix, offset = state
         parts = self.slices[block.camera]
         first = 3 * self.n_points
 
-        def add(part_slice, value):  # value (M, 2, n)
+        def add(part_slice: slice, value: np.ndarray) -> None:  # value (M, 2, n)
             derivative[:, :, part_slice.start - first:part_slice.stop - first] = value
 
         if 'rotation' in parts:
@@ -699,7 +722,9 @@ class _Problem:
             add(parts['offset'], np.einsum('mij,mj->mi', d_world, velocity)[:, :, None])
 
     @staticmethod
-    def _focal_derivative(world, state, camera) -> np.ndarray:
+    def _focal_derivative(world: np.ndarray,
+                          state: Tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                          camera: Camera) -> np.ndarray:
         """Return d pixels / d (relative focal change), (M, 2), by a central difference."""
         rotation, centre, matrix, _ = state
         step = 1e-6
@@ -754,15 +779,16 @@ class _Problem:
         because the ball positions absorb the component along the epipolar
         lines too: half of the components are near zero.
         """
-        norms = [values for camera, values in self.per_camera(x).items() if camera]
-        norms = np.concatenate(norms) if norms else np.zeros(0)
+        tracks = [values for camera, values in self.per_camera(x).items() if camera]
+        norms = np.concatenate(tracks) if tracks else np.zeros(0)
         return max(1.4826 * float(np.median(norms)), _MIN_SCALE_PX) if len(norms) \
             else _MIN_SCALE_PX
 
     def per_camera(self, x: np.ndarray) -> Dict[int, np.ndarray]:
         """Return camera index -> (M,) reprojection error norms [px] of its detections."""
         residuals = self.residuals(x, priors=False)
-        result, position = {}, 0
+        result: Dict[int, np.ndarray] = {}
+        position = 0
         for block in self.blocks:
             count = 2 * int(block.used.sum())
             norms = np.hypot(*residuals[position:position + count].reshape(-1, 2).T)
@@ -787,7 +813,8 @@ def _lagrange_derivative(s: np.ndarray, knots_t: np.ndarray) -> np.ndarray:
     return derivative
 
 
-def _project(world, rotation, centre, matrix, camera: Camera, *, jacobian: bool = False):
+def _project(world: np.ndarray, rotation: np.ndarray, centre: np.ndarray, matrix: np.ndarray,
+             camera: Camera, *, jacobian: bool = False) -> Tuple[np.ndarray, Any]:
     """
     Project world points (M, 3) with a pose and camera matrix (the camera's distortion).
 
@@ -834,7 +861,7 @@ class _Solver:
         self.n_point = 3 * problem.n_points
         self.x = x.copy()
         self.scale_px = scale_px
-        self._cache = {}
+        self._cache: Dict[bytes, Tuple[np.ndarray, _Linearization]] = {}
         self._damping = _POINT_DAMPING
 
     def solve_points(self, theta: np.ndarray) -> Tuple[np.ndarray, _Linearization]:
@@ -895,15 +922,26 @@ class _Solver:
         """Return the residuals at the best positions for theta."""
         return self.solve_points(theta)[1].residuals
 
-    def jac(self, theta: np.ndarray) -> np.ndarray:
-        """Return the reduced Jacobian d residuals / d theta (dense, rows x parameters)."""
+    def point_moves(self, theta: np.ndarray) -> Tuple[_Linearization, np.ndarray]:
+        """
+        Return the linearization at theta and d ball positions / d theta (3N, parameters).
+
+        The implicit function theorem: the positions stay optimal as theta moves.
+        """
         linear = self.solve_points(theta)[1]
+        assert linear.cameras is not None  # solve_points linearizes the cameras too
         weights = _soft_l1_weights(linear.residuals, self.scale_px)
         moves = -_solve_band(linear.normal(weights, 1e-9),
                              linear.points_transpose(weights, linear.cameras))
+        return linear, moves
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        """Return the reduced Jacobian d residuals / d theta (dense, rows x parameters)."""
+        linear, moves = self.point_moves(theta)
+        assert linear.cameras is not None
         return linear.cameras + linear.points_times(moves)
 
-    def run(self) -> Tuple[np.ndarray, object]:
+    def run(self) -> Tuple[np.ndarray, Any]:
         """Solve; return the full parameter vector and scipy's result."""
         theta0 = self.x[self.n_point:]
         result = least_squares(self.fun, theta0, jac=self.jac, method='trf', loss=self._loss,
@@ -943,7 +981,8 @@ def _detection_noise(problem: _Problem) -> float:
     return max(1.4826 * float(np.median(np.abs(values))) / math.sqrt(20.0), _MIN_SCALE_PX)
 
 
-def _relative_covariance(problem: _Problem, x: np.ndarray, sigma_px: float) -> np.ndarray:
+def _relative_covariance(problem: _Problem, x: np.ndarray,
+                         sigma_px: float) -> Tuple[np.ndarray, float]:
     """
     Return the covariance of the camera parameters that the flights must determine.
 
@@ -952,8 +991,25 @@ def _relative_covariance(problem: _Problem, x: np.ndarray, sigma_px: float) -> n
     explains the flights as well), so the uncertainty is judged for the rig's
     relative geometry: the first camera's pose and the baseline's length held,
     the priors left out.  The first camera's rotation and centre then get 0.
+
+    Also return what it means in 3D: the rms over the ball positions of their
+    1-sigma displacement [m] by the camera parameters' uncertainty (each
+    position moving with the parameters as the implicit function theorem
+    says): the error the calibration adds to later estimates at the flights'
+    distances.
     """
-    jacobian = _Solver(problem, x, problem.scale(x)).jac(x[3 * problem.n_points:])
+    linear, moves = _Solver(problem, x, problem.scale(x)).point_moves(x[3 * problem.n_points:])
+    assert linear.cameras is not None
+    jacobian = linear.cameras + linear.points_times(moves)
+    covariance = _relative_covariance_of(problem, x, jacobian, sigma_px)
+    per_point = moves.reshape(problem.n_points, 3, -1)
+    variance = np.einsum('pai,ij,paj->p', per_point, covariance, per_point)
+    return covariance, math.sqrt(max(float(np.mean(variance)), 0.0))
+
+
+def _relative_covariance_of(problem: _Problem, x: np.ndarray, jacobian: np.ndarray,
+                            sigma_px: float) -> np.ndarray:
+    """Return the covariance of :func:`_relative_covariance` from the reduced Jacobian."""
     if not problem.keep_world:
         return _camera_covariance(jacobian, sigma_px)
     first = 3 * problem.n_points
@@ -1002,7 +1058,9 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     :param recordings: one or more recordings of observations with raw stamps
     :param offsets_s: the given offsets [s] (default: the calibrations')
     :param estimate_offsets: refine every offset but the reference's (else keep them)
-    :param focal: refine each camera's focal lengths (fx, fy by one factor)
+    :param focal: refine the focal lengths (fx, fy by one factor) of every camera but the
+        reference, whose focal length is held (with two converging cameras both are not
+        determined)
     :param keep_world: free every pose, held near the given one by priors (else: the
         reference pose fixed, the scale by the baseline of the first two cameras)
     :param baseline_m: the baseline of the first two cameras [m] (default: the given one)
@@ -1042,17 +1100,19 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
     x = _Solver(problem, x, problem.scale(x)).solve_points(x[n_point:])[0]
     before = problem.per_camera(x)
     sigma_px = _detection_noise(problem)
-    bounds = {'min_flights': min_flights, 'max_sigma_deg': max_sigma_deg,
-              'max_sigma_m': max_sigma_m, 'max_sigma_s': max_sigma_s,
-              'max_sigma_focal': max_sigma_focal}
+    bounds: Dict[str, float] = {'min_flights': min_flights, 'max_sigma_deg': max_sigma_deg,
+                                'max_sigma_m': max_sigma_m, 'max_sigma_s': max_sigma_s,
+                                'max_sigma_focal': max_sigma_focal}
 
     # Flights that leave a parameter undetermined by far (ten times its bound, judged at the
     # given calibration: the geometry, not the error, decides) are refused without a search
     # through the flat directions of the cost.
-    covariance = _relative_covariance(problem, x, sigma_px)
-    early = _report(problem, x, before, before, covariance, sigma_px, converged=True,
-                    early=True, **{key: value * (_EARLY_FACTOR if key.startswith('max') else 1)
-                                   for key, value in bounds.items()})
+    covariance, sigma_position = _relative_covariance(problem, x, sigma_px)
+    early = _report(problem, x, before, before, covariance, sigma_px, sigma_position,
+                    converged=True,
+                    early=True, bounds={key: value * (_EARLY_FACTOR if key.startswith('max')
+                                                      else 1)
+                                        for key, value in bounds.items()})
     if any('not determined' in reason for reason in early.refusals):
         return early
 
@@ -1061,26 +1121,28 @@ def refine_rig(cameras: Mapping[str, Camera] | Sequence[Camera],
         # Each round: solve, then re-assign the knots (the offsets moved), re-scale the loss and
         # leave out outliers (a cubic across a bounce), until nothing changes.
         x, result = _Solver(problem, x, problem.scale(x)).run()
-        previous = [(None if b.knots is None else b.knots.copy(), b.used.copy())
-                    for b in problem.blocks]
+        previous = [(b.knots.copy(), b.used.copy()) for b in problem.blocks]
         problem.reject(x)
-        if all(np.array_equal(used, b.used) and (
-                (knots is None and b.knots is None)
-                or (knots is not None and b.knots is not None
-                    and np.array_equal(knots, b.knots)))
+        if all(np.array_equal(used, b.used) and np.array_equal(knots, b.knots)
                for (knots, used), b in zip(previous, problem.blocks)):
             break
     else:
         x, result = _Solver(problem, x, problem.scale(x)).run()
     after = problem.per_camera(x)
-    covariance = _relative_covariance(problem, x, sigma_px)
-    return _report(problem, x, before, after, covariance, sigma_px,
-                   converged=result.status > 0, message=result.message, **bounds)
+    covariance, sigma_position = _relative_covariance(problem, x, sigma_px)
+    return _report(problem, x, before, after, covariance, sigma_px, sigma_position,
+                   converged=result.status > 0, message=result.message, bounds=bounds)
 
 
-def _report(problem: _Problem, x, before, after, covariance, scale, *, converged: bool,
-            message: str = '', early: bool = False, min_flights, max_sigma_deg, max_sigma_m,
-            max_sigma_s, max_sigma_focal) -> RefineResult:
+def _report(problem: _Problem, x: np.ndarray, before: Dict[int, np.ndarray],
+            after: Dict[int, np.ndarray], covariance: np.ndarray, scale: float,
+            sigma_position: float, *,
+            converged: bool, bounds: Mapping[str, float], message: str = '',
+            early: bool = False) -> RefineResult:
+    """Judge a solution against ``bounds`` (min_flights, max_sigma_*); build the result."""
+    min_flights = bounds['min_flights']
+    max_sigma_deg, max_sigma_m = bounds['max_sigma_deg'], bounds['max_sigma_m']
+    max_sigma_s, max_sigma_focal = bounds['max_sigma_s'], bounds['max_sigma_focal']
     n_point = 3 * problem.n_points
     flights = sum(len(f.first) for f in problem.flights)
     refusals, notes = [], []
@@ -1145,7 +1207,7 @@ def _report(problem: _Problem, x, before, after, covariance, scale, *, converged
             camera.calibration, camera_matrix=_frozen(matrix), rotation=_frozen(rotation),
             translation=_frozen(-rotation @ centre), time_offset_s=float(offset))
     return RefineResult(calibrations, reports, flights, problem.n_points, scale, refusals,
-                        notes)
+                        notes, sigma_position)
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -1154,11 +1216,11 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
-def _median(values) -> float:
+def _median(values: Optional[np.ndarray]) -> float:
     return float(np.median(values)) if values is not None and len(values) else math.nan
 
 
-def _direction_sigma(problem: _Problem, x, k, covariance) -> float:
+def _direction_sigma(problem: _Problem, x: np.ndarray, k: int, covariance: np.ndarray) -> float:
     """Propagate the 2-parameter direction's covariance to the centre's largest sigma [m]."""
     part = problem.slices[k]['direction']
     base = problem.camera_state(x, k)[1]
@@ -1171,7 +1233,7 @@ def _direction_sigma(problem: _Problem, x, k, covariance) -> float:
     return math.sqrt(float(np.max(np.diag(centre))))
 
 
-def _offset_correlation(covariance, parts, n_point) -> float:
+def _offset_correlation(covariance: np.ndarray, parts: Dict[str, slice], n_point: int) -> float:
     """Return the largest |correlation| of a camera's offset with its pose parameters."""
     offset = parts['offset'].start - n_point
     others = [c - n_point for name in ('rotation', 'centre', 'direction') if name in parts
@@ -1207,7 +1269,7 @@ def epipolar_consistency(cameras: Sequence[Camera], recordings: Sequence[Sequenc
     :return: (name a, name b) -> (median [px], compared detections); NaN median without any
     """
     cameras = list(cameras)
-    distances = {}
+    distances: Dict[Tuple[str, str], List[np.ndarray]] = {}
     for observations in recordings:
         shifted = apply_time_offsets(observations, offsets_s)
         tracks = {}

@@ -25,7 +25,7 @@ from .. import stamps
 from ..errors import RigError
 from ..rig import check_camera_name, Rig
 
-__all__ = ['add_camera_argument', 'add_recording_arguments', 'cameras_from_args',
+__all__ = ['add_camera_argument', 'add_recording_arguments', 'camera_files', 'cameras_from_args',
            'check_pixel_options', 'positive', 'read_recordings', 'seconds_to_ns',
            'time_offsets_from_args']
 
@@ -35,6 +35,32 @@ def add_camera_argument(parser: argparse.ArgumentParser, *, required: bool = Tru
     parser.add_argument('--camera', action='append', default=[], required=required,
                         metavar='NAME=CALIB.yaml',
                         help='a camera name and its calibration file (give one per camera)')
+
+
+def camera_files(values: Sequence[str]) -> dict[str, str]:
+    """
+    Parse ``NAME=CALIB.yaml`` values into camera name -> file path, in the given order.
+
+    The one parser of ``--camera``: :func:`cameras_from_args` loads the files,
+    and commands that write next to them or into them (``refine``, ``sync``)
+    take the paths from here.
+
+    :raises UsageError: malformed value, a name that is not a ROS name or a duplicate name
+    """
+    files: dict[str, str] = {}
+    for value in values:
+        name, sep, path = value.partition('=')
+        name, path = name.strip(), path.strip()
+        if not sep or not name or not path:
+            raise UsageError(f'--camera {value!r}: expected NAME=CALIB.yaml')
+        if name in files:
+            raise UsageError(f'--camera {value!r}: camera {name!r} given twice')
+        try:
+            check_camera_name(name)
+        except RigError as err:
+            raise UsageError(f'--camera {value!r}: {err}') from err
+        files[name] = path
+    return files
 
 
 def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
@@ -48,22 +74,10 @@ def cameras_from_args(values: Sequence[str], *, minimum: int = 2) -> Rig:
         too few cameras
     :raises CalibrationError: a calibration file is missing or malformed
     """
-    files: list[tuple[str, str]] = []
-    for value in values:
-        name, sep, path = value.partition('=')
-        name, path = name.strip(), path.strip()
-        if not sep or not name or not path:
-            raise UsageError(f'--camera {value!r}: expected NAME=CALIB.yaml')
-        if name in (known for known, _ in files):
-            raise UsageError(f'--camera {value!r}: camera {name!r} given twice')
-        try:
-            check_camera_name(name)
-        except RigError as err:
-            raise UsageError(f'--camera {value!r}: {err}') from err
-        files.append((name, path))
+    files = camera_files(values)
     if len(files) < minimum:
         raise UsageError(f'--camera: need at least {minimum} cameras, got {len(files)}')
-    return Rig.from_files(files)
+    return Rig.from_files(list(files.items()))
 
 
 def seconds_to_ns(value: float, option: str) -> int:

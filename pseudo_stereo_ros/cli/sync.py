@@ -28,9 +28,9 @@ import math
 import sys
 
 from . import UsageError
-from .common import (add_camera_argument, add_recording_arguments, cameras_from_args,
-                     read_recordings)
-from ..calibration import write_time_offsets
+from .common import (add_camera_argument, add_recording_arguments, camera_files,
+                     cameras_from_args, read_recordings)
+from ..calibration import PathLike, write_time_offsets
 from ..timesync import DEFAULT_MAX_UNCERTAINTY_S, estimate_time_offsets
 
 __all__ = ['HELP', 'NAME', 'add_arguments', 'run']
@@ -73,10 +73,7 @@ def run(args) -> int:
     _check(args.max_gap_s, '--max-gap-s', positive=True)
     _check(args.max_uncertainty_s, '--max-uncertainty-s', positive=True)
     cameras = cameras_from_args(args.camera)
-    files = {}
-    for value in args.camera:
-        name, _, path = value.partition('=')
-        files[name.strip()] = path.strip()
+    files = camera_files(args.camera)
     recordings = read_recordings(args, cameras)
     result = estimate_time_offsets(cameras, recordings, search_s=args.search_s,
                                    max_gap_s=args.max_gap_s,
@@ -94,11 +91,13 @@ def run(args) -> int:
             raise UsageError(f'--write: not writing: {", ".join(blocked)} ha'
                              f'{"s" if len(blocked) == 1 else "ve"} a warning (see above); '
                              'nothing written')
-        updates = {files[name]: result.offsets_s[name] for name in list(cameras)[1:]}
+        updates: dict[PathLike, float] = {files[name]: result.offsets_s[name]
+                                          for name in list(cameras)[1:]}
         if len(set(updates)) != len(updates):
             raise UsageError('--write: two cameras share a calibration file; nothing written')
         write_time_offsets(updates)
-        print('wrote time_offset_s to ' + ', '.join(updates), file=sys.stderr)
+        print('wrote time_offset_s to ' + ', '.join(str(path) for path in updates),
+              file=sys.stderr)
     return 0
 
 

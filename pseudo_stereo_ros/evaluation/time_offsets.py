@@ -26,7 +26,7 @@ on the common (true) clock.  ROS-free.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Dict, List, Mapping, Optional, Sequence
+from typing import Dict, List, Mapping, Optional, Sequence, Union
 
 import cv2
 import numpy as np
@@ -34,11 +34,16 @@ import numpy as np
 from ..calibration import CameraCalibration
 from ..camera import Camera
 from ..records import Observation
-from ..sim.scenarios import DEFAULT_EPOCH_NS, make_scenario, observe, shutter_stamps
+from ..sim.scenarios import (DEFAULT_EPOCH_NS, GRAVITY, make_scenario, observe, Scenario,
+                             shutter_stamps)
 from ..stamps import seconds_to_ns
 
-__all__ = ['FlightRecording', 'event_errors_mm', 'perturbed_calibration', 'simulate_flights',
-           'truth_at_stamps']
+__all__ = ['FlightRecording', 'THROW_VOLUME_M', 'ballistic_throw', 'event_errors_mm',
+           'perturbed_calibration', 'random_throws', 'simulate_flights', 'truth_at_stamps']
+
+#: The box [m] (x, y, z lows; x, y, z highs) where throws of the default rig start and end: both
+#: cameras see it whole, and nearly all of the arcs above it, from 2 to 6 m away.
+THROW_VOLUME_M = ((-0.5, 0.0, 0.0), (3.5, 4.0, 1.5))
 
 
 @dataclass(frozen=True)
@@ -59,8 +64,51 @@ class FlightRecording:
     offsets_s: Dict[str, float]
 
 
+def ballistic_throw(start: Union[Sequence[float], np.ndarray],
+                    end: Union[Sequence[float], np.ndarray],
+                    duration_s: float) -> Scenario:
+    """
+    Return a throw: a free parabola (gravity along -z) from ``start`` to ``end`` [m].
+
+    :param start: where the ball leaves the hand (3,) [m]
+    :param end: where it is caught ``duration_s`` later (3,) [m]
+    :param duration_s: flight time [s]
+    """
+    begin = np.asarray(start, dtype=float)
+    finish = np.asarray(end, dtype=float)
+    velocity = (finish - begin) / duration_s + np.array((0.0, 0.0, 0.5 * GRAVITY * duration_s))
+
+    def position(t):
+        t = np.asarray(t, dtype=float)[:, None]
+        return begin + velocity * t - np.array((0.0, 0.0, 0.5 * GRAVITY)) * t * t
+
+    return Scenario('throw', float(duration_s), position,
+                    f'throw {np.round(begin, 2)} -> {np.round(finish, 2)} m in {duration_s:.2f} s')
+
+
+def random_throws(count: int, *, seed: int = 0, duration_s: tuple = (0.6, 1.0),
+                  volume_m: tuple = THROW_VOLUME_M) -> List[Scenario]:
+    """
+    Return ``count`` throws between random points of a box, in random directions.
+
+    What a user does "with a few throws of a ball": across the view, towards
+    and away from the cameras, high and low.  Start and end are drawn
+    uniformly in ``volume_m``, the flight time in ``duration_s``.
+
+    :param count: number of throws
+    :param seed: random seed
+    :param duration_s: (shortest, longest) flight time [s]
+    :param volume_m: ((x, y, z) low, (x, y, z) high) corners of the box [m]
+    """
+    rng = np.random.default_rng(seed)
+    low, high = (np.asarray(corner, dtype=float) for corner in volume_m)
+    return [ballistic_throw(rng.uniform(low, high), rng.uniform(low, high),
+                            float(rng.uniform(*duration_s))) for _ in range(count)]
+
+
 def simulate_flights(cameras: Sequence[Camera], *, offsets_s: Mapping[str, float],
-                     scenarios: Sequence[str] = ('spiral', 'bounce', 'straight'),
+                     scenarios: Sequence[Union[str, Scenario]] = ('spiral', 'bounce',
+                                                                  'straight'),
                      fps: float = 30.0, phases_s: Optional[Sequence[float]] = None,
                      noise_px: float = 0.0, quantization_px: float = 0.05,
                      pause_s: float = 0.5, dropout: float = 0.0, seed: int = 0,
@@ -71,7 +119,8 @@ def simulate_flights(cameras: Sequence[Camera], *, offsets_s: Mapping[str, float
 
     :param cameras: the cameras (their calibrations are the truth)
     :param offsets_s: camera name -> true offset [s] (recorded stamp = true time - offset)
-    :param scenarios: scenario names, played in order with ``pause_s`` between them
+    :param scenarios: scenarios (or their names), played in order with ``pause_s`` between
+        them
     :param fps: frame rate of every camera [Hz]
     :param phases_s: per camera, its first shutter after the start [s] (default: evenly
         spread over one frame period)
@@ -87,7 +136,8 @@ def simulate_flights(cameras: Sequence[Camera], *, offsets_s: Mapping[str, float
     options = dict(scenario_options or {})
     flights, start = [], 0.0
     for name in scenarios:
-        scenario = make_scenario(name, **options.get(name, {}))
+        scenario = (name if isinstance(name, Scenario)
+                    else make_scenario(name, **options.get(name, {})))
         flights.append((start, scenario))
         start += scenario.duration_s + pause_s
     duration = start
