@@ -26,7 +26,7 @@ from ..errors import RigError
 from ..rig import check_camera_name, Rig
 
 __all__ = ['add_camera_argument', 'add_recording_arguments', 'camera_files', 'cameras_from_args',
-           'check_pixel_options', 'positive', 'read_recordings', 'seconds_to_ns',
+           'check_pixel_options', 'name_values', 'positive', 'read_recordings', 'seconds_to_ns',
            'time_offsets_from_args']
 
 
@@ -37,29 +37,49 @@ def add_camera_argument(parser: argparse.ArgumentParser, *, required: bool = Tru
                         help='a camera name and its calibration file (give one per camera)')
 
 
+def name_values(values: Sequence[str], option: str, *, what: str = 'VALUE',
+                names: Sequence[str] | None = None) -> dict[str, str]:
+    """
+    Parse repeated ``NAME=VALUE`` option values into name -> value, in the given order.
+
+    The one parser of per-camera options (``--camera``, ``--time-offset``, and
+    ``bringup``'s ``--camera``, ``--calibration``, ``--fps``, ``--phase``).
+
+    :param option: the option, for the messages (e.g. ``--camera``)
+    :param what: what VALUE is, for the messages (e.g. ``CALIB.yaml``)
+    :param names: the allowed names (None: any)
+    :raises UsageError: a value without NAME or VALUE, a name not among ``names``, a name twice
+    """
+    pairs: dict[str, str] = {}
+    for value in values:
+        name, sep, text = value.partition('=')
+        name, text = name.strip(), text.strip()
+        if not sep or not name or not text:
+            raise UsageError(f'{option} {value!r}: expected NAME={what}')
+        if names is not None and name not in names:
+            raise UsageError(f'{option} {value!r}: no camera {name!r}, not one of the cameras '
+                             f'({", ".join(names)})')
+        if name in pairs:
+            raise UsageError(f'{option} {value!r}: camera {name!r} given twice')
+        pairs[name] = text
+    return pairs
+
+
 def camera_files(values: Sequence[str]) -> dict[str, str]:
     """
     Parse ``NAME=CALIB.yaml`` values into camera name -> file path, in the given order.
 
-    The one parser of ``--camera``: :func:`cameras_from_args` loads the files,
-    and commands that write next to them or into them (``refine``, ``sync``)
-    take the paths from here.
+    :func:`cameras_from_args` loads the files, and commands that write next to
+    them or into them (``refine``, ``sync``) take the paths from here.
 
     :raises UsageError: malformed value, a name that is not a ROS name or a duplicate name
     """
-    files: dict[str, str] = {}
-    for value in values:
-        name, sep, path = value.partition('=')
-        name, path = name.strip(), path.strip()
-        if not sep or not name or not path:
-            raise UsageError(f'--camera {value!r}: expected NAME=CALIB.yaml')
-        if name in files:
-            raise UsageError(f'--camera {value!r}: camera {name!r} given twice')
+    files = name_values(values, '--camera', what='CALIB.yaml')
+    for name, path in files.items():
         try:
             check_camera_name(name)
         except RigError as err:
-            raise UsageError(f'--camera {value!r}: {err}') from err
-        files[name] = path
+            raise UsageError(f'--camera {name}={path}: {err}') from err
     return files
 
 
@@ -113,20 +133,15 @@ def time_offsets_from_args(values: Sequence[str], cameras) -> dict:
     :raises UsageError: malformed value, unknown camera, non-finite number, a name twice
     """
     offsets = {}
-    for value in values:
-        name, sep, number = value.partition('=')
-        name = name.strip()
+    for name, number in name_values(values, '--time-offset', what='SECONDS',
+                                    names=list(cameras)).items():
         try:
             seconds = float(number)
         except ValueError:
             seconds = math.nan
-        if not sep or not name or not math.isfinite(seconds):
-            raise UsageError(f'--time-offset {value!r}: expected NAME=SECONDS (a finite number)')
-        if name not in cameras:
-            raise UsageError(f'--time-offset {value!r}: no camera {name!r} '
-                             f'(cameras: {", ".join(cameras)})')
-        if name in offsets:
-            raise UsageError(f'--time-offset {value!r}: camera {name!r} given twice')
+        if not math.isfinite(seconds):
+            raise UsageError(f'--time-offset {name}={number}: expected NAME=SECONDS '
+                             '(a finite number)')
         offsets[name] = seconds
     return offsets
 

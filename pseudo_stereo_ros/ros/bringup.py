@@ -40,7 +40,7 @@ import os
 import re
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import List, Optional
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -52,6 +52,7 @@ from .fuser_node import FuserNode
 from .monitor_node import MonitorNode
 from .node_tools import (check_params_files, close, DEFAULT_EXECUTOR, EXECUTORS, init_context,
                          spin, STARTUP_ERRORS)
+from ..cli.common import name_values
 from ..errors import RigError
 from ..fusion import METHODS
 from ..rig import check_camera_name, config_dir
@@ -106,25 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _pairs(items: List[str], option: str, names: List[str]) -> Dict[str, str]:
-    """Return ``{name: value}`` of ``NAME=VALUE`` options; raise ValueError naming the item."""
-    pairs = {}
-    for item in items:
-        name, sep, value = item.partition('=')
-        if not sep or not name or not value:
-            raise ValueError(f'{option} {item}: expected NAME=VALUE')
-        if name not in names:
-            raise ValueError(f'{option} {item}: {name} is not one of the cameras '
-                             f'{" ".join(names)}')
-        if name in pairs:
-            raise ValueError(f'{option}: {name} given twice')
-        pairs[name] = value
-    return pairs
-
-
 def _numbers(items: List[str], option: str, names: List[str], *, positive: bool):
     values = {}
-    for name, text in _pairs(items, option, names).items():
+    for name, text in name_values(items, option, names=names).items():
         try:
             value = float(text)
         except ValueError:
@@ -159,8 +144,8 @@ def camera_sources(options) -> List[dict]:
             check_camera_name(name)  # before a node takes it as its namespace
     except RigError as err:
         raise RigError(f'--cameras: {err}') from err
-    given = _pairs(options.camera, '--camera', names)
-    calibrations = _pairs(options.calibration, '--calibration', names)
+    given = name_values(options.camera, '--camera', what='SPEC', names=names)
+    calibrations = name_values(options.calibration, '--calibration', what='FILE', names=names)
     fps = _numbers(options.fps, '--fps', names, positive=True)
     phases = _numbers(options.phase, '--phase', names, positive=False)
     default_source = 'device' if options.real else (options.source or 'virtual')
