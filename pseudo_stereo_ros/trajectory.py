@@ -159,14 +159,7 @@ _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
-_CA = np.arange(9)
-# Entries of the change of time origin (tau -> tau - delta) in the coefficients: per axis
-# (a0, a1) = -delta, (a0, a2) = delta^2, (a1, a2) = -2 delta.
-_SHIFT_ROWS = np.array((0, 0, 1, 3, 3, 4, 6, 6, 7))
-_SHIFT_COLUMNS = np.array((1, 2, 2, 4, 5, 5, 7, 8, 8))
 _CV = np.array((0, 1, 3, 4, 6, 7))
-_POSITION = np.array((0, 3, 6))
-_JUMP = np.arange(9, 12)
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
@@ -198,14 +191,30 @@ _Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
 _Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
 # A camera's residual: (stamp [ns], segment, standardized residual (2,) [px]).
 _Residual: TypeAlias = tuple[int, int, np.ndarray]
-# One window's solution: (columns, beta (m,), inverse (m, m)).
-_Solution: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray]
-# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), solutions).
-_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, list[_Solution]]
+# One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
+_Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
+
+
+class _Solutions:
+    """Solutions of windows sharing their columns: ``[k]`` is window k's :data:`_Solution`."""
+
+    __slots__ = ('columns', 'betas', 'inverses')
+
+    def __init__(self, columns: int | np.ndarray, betas: np.ndarray,
+                 inverses: np.ndarray) -> None:
+        self.columns, self.betas, self.inverses = columns, betas, inverses
+
+    def __getitem__(self, k: int) -> _Solution:
+        return self.columns, self.betas[k], self.inverses[k]
+
+
+# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), depths (K,), solutions).
+_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                         _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
+_COLUMNS = {9: np.arange(9), 12: np.arange(12)}
 _EYE3 = np.eye(3)
-_EYE12 = np.eye(12)
 _UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
 
 
@@ -311,6 +320,12 @@ class TrajectoryFuser(GatedEstimator):
         # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
         self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
         self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
+        # The change of time origin (tau -> tau - delta) in the coefficients, per number of
+        # coefficients (9 without an impact, 12 with one); _fit sets its delta entries.
+        self._shift = {9: np.eye(9), 12: np.eye(12)}
+        # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
+        self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
+                               for rotation in self._rotation]
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px: float | None = None
         self._sigma_count = 0
@@ -366,14 +381,15 @@ class TrajectoryFuser(GatedEstimator):
     def _fit_frame(self, index: int, stamp: int, x: float, y: float,
                    late: bool) -> Estimate | None:
         """Add a detection (normalized x, y) to the fit; return the estimate or None."""
-        rotation = self._rotation[index]
-        rows = rotation[:2] - np.outer((x, y), rotation[2])
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
+        rows = np.array(((a0 - x * c0, a1 - x * c1, a2 - x * c2),
+                         (b0 - y * c0, b1 - y * c1, b2 - y * c2)))
         r0, r1, r2 = self._rotated_center[index]
         depth = self._depth[index]
         prediction = None
         if self._path is not None:
             prediction = self._predict(stamp)
-            predicted = float(rotation[2] @ prediction[0]) - r2
+            predicted = float(self._rotation[index, 2] @ prediction[0]) - r2
             if predicted > 0.0:
                 depth = predicted
         frame: _Frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
@@ -460,19 +476,24 @@ class TrajectoryFuser(GatedEstimator):
         end = self._end
         reference = self._reference
         assert reference is not None, 'the window holds frames, so _insert set the reference'
+        gram, moment = self._prefix_gram, self._prefix_moment
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
-            row = self._position_row(stamp - reference,
-                                     None if self._break is None else stamp - self._break)
+            tau = (stamp - reference) / _SCALE_NS
             weight = self._weight[first]
-            design = self._rows[first] @ row * weight
-            self._prefix_gram[end] = self._prefix_gram[first] + design.T @ design
-            self._prefix_moment[end] = self._prefix_moment[first] + \
-                (self._rhs[first] * weight) @ design
+            rows = self._rows[first]
+            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau.
+            design = np.zeros((2, 12))
+            design[:, :9] = (rows[:, :, None] * (1.0, tau, tau * tau)).reshape(2, 9)
+            if self._break is not None and stamp > self._break:
+                design[:, 9:] = rows * ((stamp - self._break) / _SCALE_NS)
+            design *= weight
+            gram[end] = gram[first] + design.T @ design
+            moment[end] = moment[first] + (self._rhs[first] * weight) @ design
             return
         if first == self._start:
-            self._prefix_gram[first] = 0.0
-            self._prefix_moment[first] = 0.0
+            gram[first] = 0.0
+            moment[first] = 0.0
         stamps = self._stamp[first:end]
         jump = None if self._break is None else stamps - self._break
         maps = self._position_map(stamps - reference, jump)
@@ -480,11 +501,10 @@ class TrajectoryFuser(GatedEstimator):
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
         rhs = self._rhs[first:end] * weight[:, :, 0]
         np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
-                  out=self._prefix_gram[first + 1:end + 1])
-        self._prefix_gram[first + 1:end + 1] += self._prefix_gram[first]
-        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0,
-                  out=self._prefix_moment[first + 1:end + 1])
-        self._prefix_moment[first + 1:end + 1] += self._prefix_moment[first]
+                  out=gram[first + 1:end + 1])
+        gram[first + 1:end + 1] += gram[first]
+        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0, out=moment[first + 1:end + 1])
+        moment[first + 1:end + 1] += moment[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -775,20 +795,23 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
-            np.array((count,))
+        quadratic = self.order == 2 and count >= _WINDOWS[0]
+        sizes = _sizes(count) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
-        shift = _EYE12[:unknowns, :unknowns].copy()
-        shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
+        shift = self._shift[unknowns]
+        shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
+        shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
+        shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
         gram, moment = self._prefix_gram, self._prefix_moment
+        previous = end - sizes
         matrices = shift.T @ (gram[end, :unknowns, :unknowns]
-                              - gram[end - sizes, :unknowns, :unknowns]) @ shift
-        moments = (moment[end, :unknowns] - moment[end - sizes, :unknowns]) @ shift
+                              - gram[previous, :unknowns, :unknowns]) @ shift
+        moments = (moment[end, :unknowns] - moment[previous, :unknowns]) @ shift
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept: _Fits | None = None
-        if self.order == 2 and count >= _WINDOWS[0]:
+        if quadratic:
             if t_break is None:
                 kept = self._fits(matrices, moments, sizes, 9, position, index)
             else:
@@ -811,7 +834,7 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, points, covariances, solutions = kept
+        sizes, points, covariances, depths, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
         beta, inverse = self._full(*solutions[chosen])
@@ -820,20 +843,23 @@ class TrajectoryFuser(GatedEstimator):
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
         if self._stamp[end - 1] == stamp:
-            # This frame's row in the event's coefficients: its residual for the impact gate
-            # and for the noise estimate.
+            # This frame's residual in the chosen fit (for the impact gate) and in the noise
+            # estimate's fixed-length fit; the frame's row maps the coefficients to the
+            # position at the event, so its residual and leverage need only that position
+            # and its covariance.
             weight = self._weight[end - 1]
             row = self._rows[end - 1] @ position * weight
             rhs = self._rhs[end - 1] * weight
             self._residual[index] = (stamp, self._segment,
                                      self._standardized(row, rhs, beta, inverse))
-            depth = float(self._rotation[index, 2] @ (point - self._center[index]))
-            self._depth[index] = depth
-            reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
-            if len(reference):
-                columns, reference_beta, reference_inverse = solutions[reference[0]]
-                self._measure_noise(stamp, index, row[:, columns], rhs, reference_beta,
-                                    reference_inverse)
+            self._depth[index] = float(self._rotation[index, 2] @ (point - self._center[index]))
+            reference = int(sizes.searchsorted(_NOISE_WINDOW))
+            if reference < len(sizes):
+                columns, reference_beta, reference_inverse = solutions[reference]
+                if isinstance(columns, int):
+                    columns = _COLUMNS[columns]
+                self._measure_noise(stamp, index, self._standardized(
+                    row[:, columns], rhs, reference_beta, reference_inverse))
         return point
 
     def _window_system(self, stamp: int, first: int,
@@ -866,22 +892,30 @@ class TrajectoryFuser(GatedEstimator):
         """
         Solve window systems; keep the determined, well-conditioned ones.
 
-        :param matrices: (K, 12, 12) normal matrices at the event, ``moments`` (K, 12)
-        :param sizes: (K,) window sizes [frames]
+        :param matrices: (K, m, m) normal matrices at the event (m >= the unknowns),
+            ``moments`` (K, m)
+        :param sizes: (K,) window sizes [frames], ascending
         :param columns: the unknowns: a count (the first 9 or 12 coefficients) or an index
             array (already applied to ``matrices`` and ``moments``)
         :param position: (3, 12) map from the coefficients to the position at the event
         :param index: the event's camera
-        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, solutions)``
-            with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, depths (K,),
+            solutions)`` with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
         """
         if isinstance(columns, int):
-            count, columns = columns, np.arange(columns)
-            matrices, moments = matrices[:, :count, :count], moments[:, :count]
-        keep = 2 * sizes > len(columns)  # more equations than unknowns
-        if not keep.any():
+            count = columns
+            if matrices.shape[1] != count:
+                matrices, moments = matrices[:, :count, :count], moments[:, :count]
+            selector = position[:, :count]
+        else:
+            count = len(columns)
+            selector = position[:, columns]
+        # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
+        first = int(sizes.searchsorted(count // 2, side='right'))
+        if first == len(sizes):
             return None
-        sizes, matrices, moments = sizes[keep], matrices[keep], moments[keep]
+        if first:
+            sizes, matrices, moments = sizes[first:], matrices[first:], moments[first:]
         try:
             inverses = np.linalg.inv(matrices)
         except np.linalg.LinAlgError:
@@ -889,21 +923,23 @@ class TrajectoryFuser(GatedEstimator):
         # A (numerically) singular system leaves M M^-1 far from the identity.
         unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
         betas = (inverses @ moments[:, :, None])[:, :, 0]
-        selector = position[:, columns]
         points = betas @ selector.T
         covariances = selector @ inverses @ selector.T
-        depth = (points - self._center[index]) @ self._rotation[index, 2]
+        depths = (points - self._center[index]) @ self._rotation[index, 2]
         variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
-        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depth > 0.0) & (variance > 0.0) & \
-            (variance <= limit * limit * depth * depth)
-        if not good.any():
-            return None
-        good = np.nonzero(good)[0]
-        return (sizes[good], points[good], covariances[good],
-                [(columns, betas[k], inverses[k]) for k in good])
+        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depths > 0.0) & (variance > 0.0) & \
+            (variance <= limit * limit * depths * depths)
+        if not good.all():
+            if not good.any():
+                return None
+            good = np.nonzero(good)[0]
+            sizes, points, covariances, depths = (sizes[good], points[good], covariances[good],
+                                                  depths[good])
+            betas, inverses = betas[good], inverses[good]
+        return sizes, points, covariances, depths, _Solutions(columns, betas, inverses)
 
     @staticmethod
     def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
@@ -912,24 +948,42 @@ class TrajectoryFuser(GatedEstimator):
             return second if first is None else first
         sizes = np.concatenate((first[0], second[0]))
         order = np.argsort(sizes, kind='stable')
+        solutions = [first[4][k] for k in range(len(first[0]))] + \
+            [second[4][k] for k in range(len(second[0]))]
         return (sizes[order], np.concatenate((first[1], second[1]))[order],
                 np.concatenate((first[2], second[2]))[order],
-                [(first[3] + second[3])[k] for k in order])
+                np.concatenate((first[3], second[3]))[order],
+                [solutions[k] for k in order])
 
     @staticmethod
-    def _full(columns: np.ndarray, beta: np.ndarray,
+    def _full(columns: int | np.ndarray, beta: np.ndarray,
               inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
+        """
+        Return a solution as coefficients and their covariance per px^2.
+
+        The first ``columns`` coefficients (9 or 12) or a subset (constant velocity), in
+        place among 12 (zeros elsewhere).
+        """
+        if isinstance(columns, int):
+            if columns == 12:
+                return beta, inverse
+            full_beta = np.zeros(12)
+            full_inverse = np.zeros((12, 12))
+            full_beta[:columns] = beta
+            full_inverse[:columns, :columns] = inverse
+            return full_beta, full_inverse
         full_beta = np.zeros(12)
         full_inverse = np.zeros((12, 12))
-        count = len(columns)
-        if columns[-1] == count - 1:  # the first ``count`` coefficients
-            full_beta[:count] = beta
-            full_inverse[:count, :count] = inverse
-        else:
-            full_beta[columns] = beta
-            full_inverse[np.ix_(columns, columns)] = inverse
+        full_beta[columns] = beta
+        full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
+
+    @staticmethod
+    def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
+                      inverse: np.ndarray) -> np.ndarray:
+        """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
+        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
+        return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
 
     def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
         """Return the index of the longest window consistent with every shorter one."""
@@ -955,24 +1009,16 @@ class TrajectoryFuser(GatedEstimator):
         failing = np.nonzero(bad.any(axis=0))[0]
         return int(failing[0] - 1) if len(failing) else count - 1
 
-    @staticmethod
-    def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
-                      inverse: np.ndarray) -> np.ndarray:
-        """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
-        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
-        return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
-
-    def _measure_noise(self, stamp: int, index: int, row: np.ndarray, rhs: np.ndarray,
-                       beta: np.ndarray, inverse: np.ndarray) -> None:
+    def _measure_noise(self, stamp: int, index: int, residual: np.ndarray) -> None:
         """
         Update the detection noise from the newest frame's residual (Rice's estimator).
 
-        The residual comes from a fit of fixed length (_NOISE_WINDOW frames): its
-        systematic part (the path's curvature beyond a parabola at the window's end,
-        a camera's calibration bias) is nearly the same at consecutive frames of a
-        camera and cancels in their difference; the noise does not.
+        The residual (standardized, (2,) [px]) comes from a fit of fixed length
+        (_NOISE_WINDOW frames): its systematic part (the path's curvature beyond a
+        parabola at the window's end, a camera's calibration bias) is nearly the same
+        at consecutive frames of a camera and cancels in their difference; the noise
+        does not.
         """
-        residual = self._standardized(row, rhs, beta, inverse)
         last = self._noise_residual.get(index)
         self._noise_residual[index] = (stamp, self._segment, residual)
         if last is not None and last[1] == self._segment and \
