@@ -176,6 +176,13 @@ _EULER_GAMMA = 0.5772156649015329
 _MAX_LEVERAGE = 0.5
 # Noise samples needed before detections are gated (a wrongly low noise makes false impacts).
 _SIGMA_MATURE = 10
+# Frames in the window before detections are gated: a flight's first velocity fits
+# extrapolate too roughly to tell an outlier or an impact (the real data's flight starts).
+_GATE_SUPPORT = 6
+# Frames the fit needs before its estimates replace the paper method's.
+_PAPER_SUPPORT = 6
+# Drop reasons of the fit itself (undone where the paper's estimate stands in).
+_FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending')
 # Length of the fit whose residuals measure the noise [frames].
 _NOISE_WINDOW = 10
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
@@ -326,6 +333,14 @@ class TrajectoryFuser(GatedEstimator):
         # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
         self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
                                for rotation in self._rotation]
+        # The paper's method on the same admitted detections (sharing the input gate, none
+        # of its own plausibility test: this fuser's applies): its estimate stands in while
+        # the fit has fewer than _PAPER_SUPPORT frames (a flight's first frames, a path
+        # lost), where the fit extrapolates from too little.  It sees only those frames.
+        from .fusion import Fuser  # fusion imports this module
+        self._paper = Fuser(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                            image_margin=image_margin, max_speed_mps=None)
+        self._paper.gate = self.gate
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px: float | None = None
         self._sigma_count = 0
@@ -335,6 +350,7 @@ class TrajectoryFuser(GatedEstimator):
     def _forget(self) -> None:
         """Forget the flight (a new session): window, path, impacts (the noise is kept)."""
         super()._forget()
+        self._paper._forget()
         self._start = self._end = 0
         self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
@@ -366,7 +382,21 @@ class TrajectoryFuser(GatedEstimator):
         index = self._index[camera]
         self._previous[index] = self._last.get(camera)
         self._last[camera] = stamp
-        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+        if self._end - self._start + 1 < _PAPER_SUPPORT:
+            # The fit's first frames: the paper's estimate (if any) stands in for the fit's
+            # (the paper's method sees the frames since the flight's start or the restart).
+            paper = self._paper._fuse(item)
+            stats = self.stats
+            dropped = [stats[reason] for reason in _FIT_DROPS]
+            estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+            if paper is not None and self._end - self._start < _PAPER_SUPPORT:
+                if estimate is None:  # not dropped after all: uncount the fit's reason
+                    for reason, count in zip(_FIT_DROPS, dropped):
+                        if stats[reason] > count:
+                            stats[reason] -= 1
+                estimate = paper
+        else:
+            estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
         if estimate is None:
             return None
         plausibility = self.plausibility
@@ -562,8 +592,10 @@ class TrajectoryFuser(GatedEstimator):
         """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
         stamp, index, rows, rhs, _ = frame
         if prediction is None or self._break_range is not None or \
-                self._sigma_count < _SIGMA_MATURE:
-            return 'ok'  # no path yet, an impact being placed, or the noise not known yet
+                self._sigma_count < _SIGMA_MATURE or self._end - self._start < _GATE_SUPPORT:
+            # No path yet, an impact being placed, the noise not known yet, or a path from
+            # too few frames to judge a detection by (a flight's first frames).
+            return 'ok'
         point, covariance = prediction
         found = self._innovation(index, rows, rhs, point)
         statistic = math.inf
@@ -607,8 +639,12 @@ class TrajectoryFuser(GatedEstimator):
             if self._confirm_break(frame):
                 return 'inserted'
             # Two detections in a row off the path and not explained by an impact: the path
-            # is lost (or was wrong). Start it afresh from them, as at a new flight.
+            # is lost (or was wrong). Start it afresh from them, as at a new flight; the
+            # estimates of the lost path no longer bound where the ball can be (a new ball
+            # served before the rig paused).
             self._restart()
+            self.plausibility.reset()
+            self._paper._forget()
             self._insert(pending)
             self._insert(frame)
             self.stats['restarts'] += 1

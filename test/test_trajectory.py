@@ -253,10 +253,10 @@ def test_real_data_within_the_oracle_floor(lfg_results, session):
     assert ours.available >= paper.available  # at least as many camera_3 events scored
 
 
-@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: 5 gross errors (> 20 px) '
-                   "against the oracle's 2 on the common events; three of them are 10-17 ms "
-                   'into a flight, where the oracle is at 15-18 px too')
 def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
+    # Gross errors (over 20 px) came at flight starts (the paper's estimate now stands in
+    # until the fit has six frames) and after a new ball served without a pause (the lost
+    # path's estimates no longer bound the new one's).
     ours = sum(int(np.sum(r['trajectory'].errors > 20.0)) for r in lfg_results.values())
     oracle = sum(int(np.sum(r['oracle'].errors > 20.0)) for r in lfg_results.values())
     assert ours <= 2 * oracle
