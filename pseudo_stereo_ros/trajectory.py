@@ -222,7 +222,7 @@ _Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
 _SIZES: dict[int, np.ndarray] = {}
 _COLUMNS = {9: np.arange(9), 12: np.arange(12)}
 _EYE3 = np.eye(3)
-_UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
+_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -231,6 +231,14 @@ def _sizes(count: int) -> np.ndarray:
     if sizes is None:
         sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
     return sizes
+
+
+def _pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the index pairs (j, k), j < k, of ``count`` windows: (shorter, longer)."""
+    pairs = _PAIRS.get(count)
+    if pairs is None:
+        pairs = _PAIRS[count] = np.triu_indices(count, 1)
+    return pairs
 
 
 class TrajectoryFuser(GatedEstimator):
@@ -1028,22 +1036,25 @@ class TrajectoryFuser(GatedEstimator):
             return 0
         # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
         # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
-        difference = points[None, :, :] - points[:, None, :]
+        # Only the pairs j < k are tested.
+        shorter_index, longer_index = _pairs(count)
+        difference = points[longer_index] - points[shorter_index]
         first = covariances[0]
         ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
-        spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
-        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(2)
-        upper = _UPPER[:count, :count]  # j < k only
-        if (statistic[upper] <= 0.0).any():
+        spread = covariances[shorter_index] - 0.9 * covariances[longer_index] + ridge
+        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(1)
+        if (statistic <= 0.0).any():
             # Not positive where the difference of covariances is not (windows with and
             # without an impact are not nested models): the shorter window's covariance
             # C_j bounds it.
-            shorter = np.einsum('jki,jil,jkl->jk', difference,
-                                np.linalg.inv(covariances + ridge), difference)
+            every = points[None, :, :] - points[:, None, :]
+            shorter = np.einsum('jki,jil,jkl->jk', every, np.linalg.inv(covariances + ridge),
+                                every)[shorter_index, longer_index]
             statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = (statistic > self.consistency) & upper
-        failing = np.nonzero(bad.any(axis=0))[0]
-        return int(failing[0] - 1) if len(failing) else count - 1
+        bad = statistic > self.consistency
+        if not bad.any():
+            return count - 1
+        return int(longer_index[bad].min()) - 1
 
     def _measure_noise(self, stamp: int, index: int, residual: np.ndarray) -> None:
         """
