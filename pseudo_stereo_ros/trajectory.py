@@ -105,6 +105,7 @@ later judged stray; their event already counted as an estimate or a drop).
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 import math
 from typing import TypeAlias
@@ -160,6 +161,11 @@ _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
 _CV = np.array((0, 1, 3, 4, 6, 7))
+_CV_GRID = np.ix_(_CV, _CV)
+# Fewest frames of a window whose velocity fit may replace the acceleration fit.
+_CV_SELECT_MIN = 13
+# Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
+_ORDER_CONSISTENCY = 12.0
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
@@ -181,6 +187,8 @@ _SIGMA_MATURE = 10
 _GATE_SUPPORT = 6
 # Frames the fit needs before its estimates replace the paper method's.
 _PAPER_SUPPORT = 6
+# Admitted detections the paper's method is given again at a restart.
+_RECENT = 6
 # Drop reasons of the fit itself (undone where the paper's estimate stands in).
 _FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending')
 # Length of the fit whose residuals measure the noise [frames].
@@ -359,6 +367,8 @@ class TrajectoryFuser(GatedEstimator):
         """Forget the flight (a new session): window, path, impacts (the noise is kept)."""
         super()._forget()
         self._paper._forget()
+        # The newest admitted detections, given to the paper's method again at a restart.
+        self._recent: deque[Admitted] = deque(maxlen=_RECENT)
         self._start = self._end = 0
         self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
@@ -390,21 +400,29 @@ class TrajectoryFuser(GatedEstimator):
         index = self._index[camera]
         self._previous[index] = self._last.get(camera)
         self._last[camera] = stamp
-        if self._end - self._start + 1 < _PAPER_SUPPORT:
-            # The fit's first frames: the paper's estimate (if any) stands in for the fit's
-            # (the paper's method sees the frames since the flight's start or the restart).
-            paper = self._paper._fuse(item)
-            stats = self.stats
-            dropped = [stats[reason] for reason in _FIT_DROPS]
-            estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
-            if paper is not None and self._end - self._start < _PAPER_SUPPORT:
+        # The fit's first frames (a flight's start, a restart): the paper's estimate (if any)
+        # stands in for the fit's.  The paper's method sees the frames since the flight's
+        # start; at a restart it is given again those the fit restarts from.
+        recent = self._recent
+        recent.append(item)
+        supported = self._end - self._start + 1 >= _PAPER_SUPPORT
+        paper = None if supported else self._paper._fuse(item)
+        stats = self.stats
+        dropped = [stats[reason] for reason in _FIT_DROPS]
+        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+        if self._end - self._start < _PAPER_SUPPORT:
+            if supported:  # the path was lost at this frame: the fit restarts from its frames
+                self._paper._forget()
+                first = int(self._stamp[self._start])
+                for earlier in recent:
+                    if earlier.observation.stamp_ns >= first:
+                        paper = self._paper._fuse(earlier)
+            if paper is not None:
                 if estimate is None:  # not dropped after all: uncount the fit's reason
                     for reason, count in zip(_FIT_DROPS, dropped):
                         if stats[reason] > count:
                             stats[reason] -= 1
                 estimate = paper
-        else:
-            estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
         if estimate is None:
             return None
         plausibility = self.plausibility
@@ -652,7 +670,6 @@ class TrajectoryFuser(GatedEstimator):
             # served before the rig paused).
             self._restart()
             self.plausibility.reset()
-            self._paper._forget()
             self._insert(pending)
             self._insert(frame)
             self.stats['restarts'] += 1
@@ -878,11 +895,22 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
+        window_sizes = sizes
         sizes, points, covariances, depths, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
         beta, inverse = self._full(*solutions[chosen])
         point = points[chosen]
+        if quadratic and t_break is None and chosen == len(sizes) - 1 and \
+                sizes[chosen] >= _CV_SELECT_MIN:
+            # The model's order: the chosen window's velocity fit where its acceleration is
+            # not significant (a straight stretch, or a window short enough that gravity
+            # does not show), with the same test as between windows (nested models).
+            k = int(window_sizes.searchsorted(sizes[chosen]))
+            velocity = self._velocity(matrices[k], moments[k], position, point,
+                                      covariances[chosen], sigma2)
+            if velocity is not None:
+                point, beta, inverse = velocity
         self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
@@ -905,6 +933,34 @@ class TrajectoryFuser(GatedEstimator):
                 self._measure_noise(stamp, index, self._standardized(
                     row[:, columns], rhs, reference_beta, reference_inverse))
         return point
+
+    def _velocity(self, matrix: np.ndarray, moment: np.ndarray, position: np.ndarray,
+                  point: np.ndarray, covariance: np.ndarray,
+                  sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """
+        Return (point, beta, inverse) of a window's velocity fit if consistent with its
+        acceleration fit (``point``, ``covariance`` per px^2), else None.
+        """
+        system = matrix[_CV_GRID]
+        try:
+            inverse = np.linalg.inv(system)
+        except np.linalg.LinAlgError:
+            return None
+        beta = inverse @ moment[_CV]
+        selector = position[:, _CV]
+        velocity_point = selector @ beta
+        # For nested models the difference has the difference of the covariances.
+        spread = (covariance - 0.9 * (selector @ inverse @ selector.T)) * sigma2 + \
+            _EYE3 * (1e-12 * sigma2 * float(np.trace(covariance)))
+        difference = velocity_point - point
+        try:
+            statistic = float(difference @ np.linalg.solve(spread, difference))
+        except np.linalg.LinAlgError:
+            return None
+        if not 0.0 <= statistic <= _ORDER_CONSISTENCY:
+            return None
+        full_beta, full_inverse = self._full(_CV, beta, inverse)
+        return velocity_point, full_beta, full_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
