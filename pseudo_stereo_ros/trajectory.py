@@ -161,7 +161,12 @@ _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
 _CV = np.array((0, 1, 3, 4, 6, 7))
-_CV_GRID = np.ix_(_CV, _CV)
+_CV_JUMP = np.array((0, 1, 3, 4, 6, 7, 9, 10, 11))  # the same with a velocity jump
+#: Gravity [m/s^2] of the free-fall model, along -z of the world frame (9.8 as in the paper
+#: and the simulation; the standard 9.80665 differs by 0.07 %).
+GRAVITY_MPS2 = 9.8
+# Its tau^2 coefficient of z [m per (0.1 s)^2].
+_GRAVITY_TAU2 = -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2
 # Fewest frames of a window whose velocity fit may replace the acceleration fit.
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
@@ -901,14 +906,14 @@ class TrajectoryFuser(GatedEstimator):
         chosen = self._lepski(points, covariances * sigma2)
         beta, inverse = self._full(*solutions[chosen])
         point = points[chosen]
-        if quadratic and t_break is None and chosen == len(sizes) - 1 and \
-                sizes[chosen] >= _CV_SELECT_MIN:
+        if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
             # The model's order: the chosen window's velocity fit where its acceleration is
             # not significant (a straight stretch, or a window short enough that gravity
             # does not show), with the same test as between windows (nested models).
             k = int(window_sizes.searchsorted(sizes[chosen]))
+            lower = _CV if solutions[chosen][0] == 9 else _CV_JUMP
             velocity = self._velocity(matrices[k], moments[k], position, point,
-                                      covariances[chosen], sigma2)
+                                      covariances[chosen], sigma2, lower)
             if velocity is not None:
                 point, beta, inverse = velocity
         self._path = (stamp, beta, inverse, t_break)
@@ -936,31 +941,47 @@ class TrajectoryFuser(GatedEstimator):
 
     def _velocity(self, matrix: np.ndarray, moment: np.ndarray, position: np.ndarray,
                   point: np.ndarray, covariance: np.ndarray,
-                  sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                  sigma2: float,
+                  columns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """
-        Return (point, beta, inverse) of a window's velocity fit if consistent with its
-        acceleration fit (``point``, ``covariance`` per px^2), else None.
+        Return a lower-order fit of a window, if one agrees with its acceleration fit.
+
+        The candidates are a constant velocity and a free fall (the known gravity
+        :data:`GRAVITY_MPS2` along -z): both determine position and velocity only, so
+        they share their covariance; the one whose estimate disagrees less with the
+        acceleration fit (``point``, ``covariance`` per px^2) is taken if that
+        disagreement is within ``_ORDER_CONSISTENCY``.
+
+        :param columns: the lower-order fit's coefficients (:data:`_CV`, or with an impact
+            in the window :data:`_CV_JUMP`)
+        :return: (point (3,), beta (12,), inverse (12, 12)), or None
         """
-        system = matrix[_CV_GRID]
+        system = matrix[np.ix_(columns, columns)]
         try:
             inverse = np.linalg.inv(system)
         except np.linalg.LinAlgError:
             return None
-        beta = inverse @ moment[_CV]
-        selector = position[:, _CV]
-        velocity_point = selector @ beta
+        # The free fall's known z acceleration moves to the right-hand side.
+        moments = np.stack((moment[columns], moment[columns] - matrix[columns, 8] * _GRAVITY_TAU2),
+                           axis=1)
+        betas = inverse @ moments  # (6, 2): velocity, free fall
+        selector = position[:, columns]
+        points = selector @ betas  # (3, 2)
         # For nested models the difference has the difference of the covariances.
         spread = (covariance - 0.9 * (selector @ inverse @ selector.T)) * sigma2 + \
             _EYE3 * (1e-12 * sigma2 * float(np.trace(covariance)))
-        difference = velocity_point - point
+        differences = points - point[:, None]
         try:
-            statistic = float(difference @ np.linalg.solve(spread, difference))
+            statistics = (differences * np.linalg.solve(spread, differences)).sum(axis=0)
         except np.linalg.LinAlgError:
             return None
-        if not 0.0 <= statistic <= _ORDER_CONSISTENCY:
+        best = int(np.argmin(statistics))
+        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
             return None
-        full_beta, full_inverse = self._full(_CV, beta, inverse)
-        return velocity_point, full_beta, full_inverse
+        full_beta, full_inverse = self._full(columns, betas[:, best], inverse)
+        if best == 1:
+            full_beta[8] = _GRAVITY_TAU2
+        return points[:, best], full_beta, full_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
