@@ -414,7 +414,7 @@ class TrajectoryFuser(GatedEstimator):
         paper = None if supported else self._paper._fuse(item)
         stats = self.stats
         dropped = [stats[reason] for reason in _FIT_DROPS]
-        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late, item.fresh)
         if self._end - self._start < _PAPER_SUPPORT:
             if supported:  # the path was lost at this frame: the fit restarts from its frames
                 self._paper._forget()
@@ -439,9 +439,16 @@ class TrajectoryFuser(GatedEstimator):
             self.stats['predicted'] += 1
         return estimate
 
-    def _fit_frame(self, index: int, stamp: int, x: float, y: float,
-                   late: bool) -> Estimate | None:
-        """Add a detection (normalized x, y) to the fit; return the estimate or None."""
+    def _fit_frame(self, index: int, stamp: int, x: float, y: float, late: bool,
+                   fresh: bool = False) -> Estimate | None:
+        """
+        Add a detection (normalized x, y) to the fit; return the estimate or None.
+
+        A ``late`` detection, or a ``fresh`` one (its camera was silent for longer than
+        its max gap), is fitted without gating: while the other cameras saw the ball alone
+        the path drifted where they cannot see (along their rays), and they would judge
+        the returning camera's detections stray.
+        """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
         rows = np.array(((a0 - x * c0, a1 - x * c1, a2 - x * c2),
                          (b0 - y * c0, b1 - y * c1, b2 - y * c2)))
@@ -457,6 +464,8 @@ class TrajectoryFuser(GatedEstimator):
                          self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
+        elif fresh:
+            self._pending = None  # the path is corrected by this detection, not judged
         else:
             verdict = self._check(frame, prediction)
             if verdict == 'pending':
