@@ -50,8 +50,25 @@ fixed length (Rice's estimator: the systematic part of a residual, a
 calibration bias or the curvature a parabola misses at the window's end, is
 nearly the same at consecutive frames and cancels; the noise does not),
 averaged in the log domain so that rare large samples do not inflate it, and
-never below ``min_sigma_px``.  Before a constant-acceleration fit is possible
-(a flight's first frames) a constant-velocity fit of all frames serves.
+never below ``min_sigma_px``.
+
+**Model order.**  Where the rule keeps the longest window (at least 13
+frames: the path is smooth at that scale), two lower-order fits of that
+window compete with its constant acceleration: a constant velocity and a free
+fall (gravity :data:`GRAVITY_MPS2` along -z, known); both have the variance of
+a velocity fit, much smaller than a parabola's at the window's end.  The one
+that disagrees less with the acceleration fit is used if that disagreement is
+within the same kind of chi-square bound (nested models: the difference has
+the difference of their covariances).  A straight line keeps the velocity
+fit, a ball in flight the free fall, a curve the acceleration fit.
+
+**A flight's first frames.**  Until the window holds six frames (a flight's
+start, or a restart after the path was lost) the paper's method
+(:class:`pseudo_stereo_ros.fusion.Fuser`, on the same admitted detections)
+gives the estimate: a fit of so few frames extrapolates more roughly than the
+paper's anchors (the real sessions' flight starts), and no detection is gated
+by it.  Where the paper has none yet either, a constant-velocity fit of all
+frames serves.
 
 **Impacts and outliers.**  A new detection is compared with the path
 predicted from the previous event: its innovation less that camera's last
@@ -72,7 +89,12 @@ are fitted with the jump, placed halfway into one of the last two intervals
 before the pending frame, and its time is refined on a grid over the next six
 frames.  Windows that reach back past the impact carry the jump; frames
 before an earlier impact are dropped.  Two disagreeing detections that no jump
-explains mean the path is lost: the fit restarts from them (``restarts``).
+explains mean the path is lost: the fit restarts from them (``restarts``), and
+the lost path's estimates no longer bound the plausible speed (a new ball
+served before the rig paused).  A camera's first detection after a silence
+longer than its max gap is fitted without gating: meanwhile the path drifted
+along the other cameras' rays, where they cannot see, and they would judge the
+returning camera's detections stray.
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
