@@ -56,11 +56,12 @@ never below ``min_sigma_px``.
 frames: the path is smooth at that scale), two lower-order fits of that
 window compete with its constant acceleration: a constant velocity and a free
 fall (gravity :data:`GRAVITY_MPS2` along -z, known); both have the variance of
-a velocity fit, much smaller than a parabola's at the window's end.  The one
-that disagrees less with the acceleration fit is used if that disagreement is
-within the same kind of chi-square bound (nested models: the difference has
-the difference of their covariances).  A straight line keeps the velocity
-fit, a ball in flight the free fall, a curve the acceleration fit.
+a velocity fit, much smaller than a parabola's at the window's end.  Each is
+the acceleration fit under a linear constraint (its acceleration fixed), so it
+follows from that fit's solution; the one whose fixed acceleration the fitted
+one differs from less (Wald's chi-square) is used if that is within 12.  A
+straight line keeps the velocity fit, a ball in flight the free fall, a curve
+the acceleration fit.
 
 **A flight's first frames.**  Until the window holds six frames (a flight's
 start, or a restart after the path was lost) the paper's method
@@ -183,12 +184,14 @@ _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
 _CV = np.array((0, 1, 3, 4, 6, 7))
-_CV_JUMP = np.array((0, 1, 3, 4, 6, 7, 9, 10, 11))  # the same with a velocity jump
 #: Gravity [m/s^2] of the free-fall model, along -z of the world frame (9.8 as in the paper
 #: and the simulation; the standard 9.80665 differs by 0.07 %).
 GRAVITY_MPS2 = 9.8
-# Its tau^2 coefficient of z [m per (0.1 s)^2].
-_GRAVITY_TAU2 = -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2
+# The acceleration's coefficients (tau^2 per axis) and their fixed values in the
+# lower-order models: a constant velocity, a free fall [m per (0.1 s)^2].
+_ACCELERATION = np.array((2, 5, 8))
+_FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
+                                 (0.0, -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2)))
 # Fewest frames of a window whose velocity fit may replace the acceleration fit.
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
@@ -931,22 +934,17 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        window_sizes = sizes
         sizes, points, covariances, depths, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
         beta, inverse = self._full(*solutions[chosen])
         point = points[chosen]
         if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
-            # The model's order: the chosen window's velocity fit where its acceleration is
-            # not significant (a straight stretch, or a window short enough that gravity
-            # does not show), with the same test as between windows (nested models).
-            k = int(window_sizes.searchsorted(sizes[chosen]))
-            lower = _CV if solutions[chosen][0] == 9 else _CV_JUMP
-            velocity = self._velocity(matrices[k], moments[k], position, point,
-                                      covariances[chosen], sigma2, lower)
-            if velocity is not None:
-                point, beta, inverse = velocity
+            # The model's order: the chosen window's constant velocity or free fall where
+            # its acceleration does not differ significantly from theirs.
+            lower = self._lower_order(beta, inverse, position, sigma2)
+            if lower is not None:
+                point, beta, inverse = lower
         self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
@@ -970,49 +968,40 @@ class TrajectoryFuser(GatedEstimator):
                     row[:, columns], rhs, reference_beta, reference_inverse))
         return point
 
-    def _velocity(self, matrix: np.ndarray, moment: np.ndarray, position: np.ndarray,
-                  point: np.ndarray, covariance: np.ndarray,
-                  sigma2: float,
-                  columns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
+                     sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """
-        Return a lower-order fit of a window, if one agrees with its acceleration fit.
+        Return a window's lower-order fit, if its acceleration fit does not reject it.
 
-        The candidates are a constant velocity and a free fall (the known gravity
-        :data:`GRAVITY_MPS2` along -z): both determine position and velocity only, so
-        they share their covariance; the one whose estimate disagrees less with the
-        acceleration fit (``point``, ``covariance`` per px^2) is taken if that
-        disagreement is within ``_ORDER_CONSISTENCY``.
+        The candidates fix the acceleration: zero (a constant velocity) or the known
+        gravity :data:`GRAVITY_MPS2` along -z (a free fall).  Each is the acceleration
+        fit under a linear constraint, so its coefficients, their covariance and the
+        test (Wald's chi-square, 3 d.o.f., of the fitted acceleration against the fixed
+        one) follow from the acceleration fit's solution alone.  The candidate with the
+        smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
+        jump at an impact stays free.
 
-        :param columns: the lower-order fit's coefficients (:data:`_CV`, or with an impact
-            in the window :data:`_CV_JUMP`)
-        :return: (point (3,), beta (12,), inverse (12, 12)), or None
+        :param beta: (12,) the acceleration fit's coefficients at the event
+        :param inverse: (12, 12) their covariance per px^2
+        :param position: (3, 12) map from the coefficients to the position at the event
+        :param sigma2: the detection noise's variance [px^2]
+        :return: (point (3,), beta (12,), inverse (12, 12)) of the lower-order fit, or None
         """
-        system = matrix[np.ix_(columns, columns)]
+        gain = inverse[:, _ACCELERATION]  # (12, 3)
+        block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
+        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
         try:
-            inverse = np.linalg.inv(system)
+            solved = np.linalg.solve(block, np.concatenate((offsets, gain.T), axis=1))
         except np.linalg.LinAlgError:
             return None
-        # The free fall's known z acceleration moves to the right-hand side.
-        moments = np.stack((moment[columns], moment[columns] - matrix[columns, 8] * _GRAVITY_TAU2),
-                           axis=1)
-        betas = inverse @ moments  # (6, 2): velocity, free fall
-        selector = position[:, columns]
-        points = selector @ betas  # (3, 2)
-        # For nested models the difference has the difference of the covariances.
-        spread = (covariance - 0.9 * (selector @ inverse @ selector.T)) * sigma2 + \
-            _EYE3 * (1e-12 * sigma2 * float(np.trace(covariance)))
-        differences = points - point[:, None]
-        try:
-            statistics = (differences * np.linalg.solve(spread, differences)).sum(axis=0)
-        except np.linalg.LinAlgError:
-            return None
+        statistics = (offsets * solved[:, :2]).sum(axis=0) / sigma2
         best = int(np.argmin(statistics))
         if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
             return None
-        full_beta, full_inverse = self._full(columns, betas[:, best], inverse)
-        if best == 1:
-            full_beta[8] = _GRAVITY_TAU2
-        return points[:, best], full_beta, full_inverse
+        lower_beta = beta - gain @ solved[:, best]
+        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
+        lower_inverse = inverse - gain @ solved[:, 2:]
+        return position @ lower_beta, lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
