@@ -50,8 +50,26 @@ fixed length (Rice's estimator: the systematic part of a residual, a
 calibration bias or the curvature a parabola misses at the window's end, is
 nearly the same at consecutive frames and cancels; the noise does not),
 averaged in the log domain so that rare large samples do not inflate it, and
-never below ``min_sigma_px``.  Before a constant-acceleration fit is possible
-(a flight's first frames) a constant-velocity fit of all frames serves.
+never below ``min_sigma_px``.
+
+**Model order.**  Where the rule keeps the longest window (at least 13
+frames: the path is smooth at that scale), two lower-order fits of that
+window compete with its constant acceleration: a constant velocity and a free
+fall (gravity :data:`GRAVITY_MPS2` along -z, known); both have the variance of
+a velocity fit, much smaller than a parabola's at the window's end.  Each is
+the acceleration fit under a linear constraint (its acceleration fixed), so it
+follows from that fit's solution; the one whose fixed acceleration the fitted
+one differs from less (Wald's chi-square) is used if that is within 12.  A
+straight line keeps the velocity fit, a ball in flight the free fall, a curve
+the acceleration fit.
+
+**A flight's first frames.**  Until the window holds six frames (a flight's
+start, or a restart after the path was lost) the paper's method
+(:class:`pseudo_stereo_ros.fusion.Fuser`, on the same admitted detections)
+gives the estimate: a fit of so few frames extrapolates more roughly than the
+paper's anchors (the real sessions' flight starts), and no detection is gated
+by it.  Where the paper has none yet either, a constant-velocity fit of all
+frames serves.
 
 **Impacts and outliers.**  A new detection is compared with the path
 predicted from the previous event: its innovation less that camera's last
@@ -72,7 +90,12 @@ are fitted with the jump, placed halfway into one of the last two intervals
 before the pending frame, and its time is refined on a grid over the next six
 frames.  Windows that reach back past the impact carry the jump; frames
 before an earlier impact are dropped.  Two disagreeing detections that no jump
-explains mean the path is lost: the fit restarts from them (``restarts``).
+explains mean the path is lost: the fit restarts from them (``restarts``), and
+the lost path's estimates no longer bound the plausible speed (a new ball
+served before the rig paused).  A camera's first detection after a silence
+longer than its max gap is fitted without gating: meanwhile the path drifted
+along the other cameras' rays, where they cannot see, and they would judge the
+returning camera's detections stray.
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
@@ -105,6 +128,7 @@ later judged stray; their event already counted as an estimate or a drop).
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 import math
 from typing import TypeAlias
@@ -159,14 +183,19 @@ _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
-_CA = np.arange(9)
-# Entries of the change of time origin (tau -> tau - delta) in the coefficients: per axis
-# (a0, a1) = -delta, (a0, a2) = delta^2, (a1, a2) = -2 delta.
-_SHIFT_ROWS = np.array((0, 0, 1, 3, 3, 4, 6, 6, 7))
-_SHIFT_COLUMNS = np.array((1, 2, 2, 4, 5, 5, 7, 8, 8))
 _CV = np.array((0, 1, 3, 4, 6, 7))
-_POSITION = np.array((0, 3, 6))
-_JUMP = np.arange(9, 12)
+#: Gravity [m/s^2] of the free-fall model, along -z of the world frame (9.8 as in the paper
+#: and the simulation; the standard 9.80665 differs by 0.07 %).
+GRAVITY_MPS2 = 9.8
+# The acceleration's coefficients (tau^2 per axis) and their fixed values in the
+# lower-order models: a constant velocity, a free fall [m per (0.1 s)^2].
+_ACCELERATION = np.array((2, 5, 8))
+_FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
+                                 (0.0, -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2)))
+# Fewest frames of a window whose velocity fit may replace the acceleration fit.
+_CV_SELECT_MIN = 13
+# Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
+_ORDER_CONSISTENCY = 12.0
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
@@ -183,6 +212,15 @@ _EULER_GAMMA = 0.5772156649015329
 _MAX_LEVERAGE = 0.5
 # Noise samples needed before detections are gated (a wrongly low noise makes false impacts).
 _SIGMA_MATURE = 10
+# Frames in the window before detections are gated: a flight's first velocity fits
+# extrapolate too roughly to tell an outlier or an impact (the real data's flight starts).
+_GATE_SUPPORT = 6
+# Frames the fit needs before its estimates replace the paper method's.
+_PAPER_SUPPORT = 6
+# Admitted detections the paper's method is given again at a restart.
+_RECENT = 6
+# Drop reasons of the fit itself (undone where the paper's estimate stands in).
+_FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending')
 # Length of the fit whose residuals measure the noise [frames].
 _NOISE_WINDOW = 10
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
@@ -198,15 +236,31 @@ _Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
 _Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
 # A camera's residual: (stamp [ns], segment, standardized residual (2,) [px]).
 _Residual: TypeAlias = tuple[int, int, np.ndarray]
-# One window's solution: (columns, beta (m,), inverse (m, m)).
-_Solution: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray]
-# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), solutions).
-_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, list[_Solution]]
+# One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
+_Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
+
+
+class _Solutions:
+    """Solutions of windows sharing their columns: ``[k]`` is window k's :data:`_Solution`."""
+
+    __slots__ = ('columns', 'betas', 'inverses')
+
+    def __init__(self, columns: int | np.ndarray, betas: np.ndarray,
+                 inverses: np.ndarray) -> None:
+        self.columns, self.betas, self.inverses = columns, betas, inverses
+
+    def __getitem__(self, k: int) -> _Solution:
+        return self.columns, self.betas[k], self.inverses[k]
+
+
+# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), depths (K,), solutions).
+_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                         _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
+_COLUMNS = {9: np.arange(9), 12: np.arange(12)}
 _EYE3 = np.eye(3)
-_EYE12 = np.eye(12)
-_UPPER = np.triu(np.ones((len(_WINDOWS) + 1, len(_WINDOWS) + 1), dtype=bool), 1)
+_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -215,6 +269,14 @@ def _sizes(count: int) -> np.ndarray:
     if sizes is None:
         sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
     return sizes
+
+
+def _pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the index pairs (j, k), j < k, of ``count`` windows: (shorter, longer)."""
+    pairs = _PAIRS.get(count)
+    if pairs is None:
+        pairs = _PAIRS[count] = np.triu_indices(count, 1)
+    return pairs
 
 
 class TrajectoryFuser(GatedEstimator):
@@ -311,6 +373,20 @@ class TrajectoryFuser(GatedEstimator):
         # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
         self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
         self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
+        # The change of time origin (tau -> tau - delta) in the coefficients, per number of
+        # coefficients (9 without an impact, 12 with one); _fit sets its delta entries.
+        self._shift = {9: np.eye(9), 12: np.eye(12)}
+        # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
+        self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
+                               for rotation in self._rotation]
+        # The paper's method on the same admitted detections (sharing the input gate, none
+        # of its own plausibility test: this fuser's applies): its estimate stands in while
+        # the fit has fewer than _PAPER_SUPPORT frames (a flight's first frames, a path
+        # lost), where the fit extrapolates from too little.  It sees only those frames.
+        from .fusion import Fuser  # fusion imports this module
+        self._paper = Fuser(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+                            image_margin=image_margin, max_speed_mps=None)
+        self._paper.gate = self.gate
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px: float | None = None
         self._sigma_count = 0
@@ -320,6 +396,9 @@ class TrajectoryFuser(GatedEstimator):
     def _forget(self) -> None:
         """Forget the flight (a new session): window, path, impacts (the noise is kept)."""
         super()._forget()
+        self._paper._forget()
+        # The newest admitted detections, given to the paper's method again at a restart.
+        self._recent: deque[Admitted] = deque(maxlen=_RECENT)
         self._start = self._end = 0
         self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
@@ -351,7 +430,29 @@ class TrajectoryFuser(GatedEstimator):
         index = self._index[camera]
         self._previous[index] = self._last.get(camera)
         self._last[camera] = stamp
-        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late)
+        # The fit's first frames (a flight's start, a restart): the paper's estimate (if any)
+        # stands in for the fit's.  The paper's method sees the frames since the flight's
+        # start; at a restart it is given again those the fit restarts from.
+        recent = self._recent
+        recent.append(item)
+        supported = self._end - self._start + 1 >= _PAPER_SUPPORT
+        paper = None if supported else self._paper._fuse(item)
+        stats = self.stats
+        dropped = [stats[reason] for reason in _FIT_DROPS]
+        estimate = self._fit_frame(index, stamp, item.x, item.y, item.late, item.fresh)
+        if self._end - self._start < _PAPER_SUPPORT:
+            if supported:  # the path was lost at this frame: the fit restarts from its frames
+                self._paper._forget()
+                first = int(self._stamp[self._start])
+                for earlier in recent:
+                    if earlier.observation.stamp_ns >= first:
+                        paper = self._paper._fuse(earlier)
+            if paper is not None:
+                if estimate is None:  # not dropped after all: uncount the fit's reason
+                    for reason, count in zip(_FIT_DROPS, dropped):
+                        if stats[reason] > count:
+                            stats[reason] -= 1
+                estimate = paper
         if estimate is None:
             return None
         plausibility = self.plausibility
@@ -363,23 +464,33 @@ class TrajectoryFuser(GatedEstimator):
             self.stats['predicted'] += 1
         return estimate
 
-    def _fit_frame(self, index: int, stamp: int, x: float, y: float,
-                   late: bool) -> Estimate | None:
-        """Add a detection (normalized x, y) to the fit; return the estimate or None."""
-        rotation = self._rotation[index]
-        rows = rotation[:2] - np.outer((x, y), rotation[2])
+    def _fit_frame(self, index: int, stamp: int, x: float, y: float, late: bool,
+                   fresh: bool = False) -> Estimate | None:
+        """
+        Add a detection (normalized x, y) to the fit; return the estimate or None.
+
+        A ``late`` detection, or a ``fresh`` one (its camera was silent for longer than
+        its max gap), is fitted without gating: while the other cameras saw the ball alone
+        the path drifted where they cannot see (along their rays), and they would judge
+        the returning camera's detections stray.
+        """
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
+        rows = np.array(((a0 - x * c0, a1 - x * c1, a2 - x * c2),
+                         (b0 - y * c0, b1 - y * c1, b2 - y * c2)))
         r0, r1, r2 = self._rotated_center[index]
         depth = self._depth[index]
         prediction = None
         if self._path is not None:
             prediction = self._predict(stamp)
-            predicted = float(rotation[2] @ prediction[0]) - r2
+            predicted = float(self._rotation[index, 2] @ prediction[0]) - r2
             if predicted > 0.0:
                 depth = predicted
         frame: _Frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
                          self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
+        elif fresh:
+            self._pending = None  # the path is corrected by this detection, not judged
         else:
             verdict = self._check(frame, prediction)
             if verdict == 'pending':
@@ -460,19 +571,24 @@ class TrajectoryFuser(GatedEstimator):
         end = self._end
         reference = self._reference
         assert reference is not None, 'the window holds frames, so _insert set the reference'
+        gram, moment = self._prefix_gram, self._prefix_moment
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
-            row = self._position_row(stamp - reference,
-                                     None if self._break is None else stamp - self._break)
+            tau = (stamp - reference) / _SCALE_NS
             weight = self._weight[first]
-            design = self._rows[first] @ row * weight
-            self._prefix_gram[end] = self._prefix_gram[first] + design.T @ design
-            self._prefix_moment[end] = self._prefix_moment[first] + \
-                (self._rhs[first] * weight) @ design
+            rows = self._rows[first]
+            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau.
+            design = np.zeros((2, 12))
+            design[:, :9] = (rows[:, :, None] * (1.0, tau, tau * tau)).reshape(2, 9)
+            if self._break is not None and stamp > self._break:
+                design[:, 9:] = rows * ((stamp - self._break) / _SCALE_NS)
+            design *= weight
+            gram[end] = gram[first] + design.T @ design
+            moment[end] = moment[first] + (self._rhs[first] * weight) @ design
             return
         if first == self._start:
-            self._prefix_gram[first] = 0.0
-            self._prefix_moment[first] = 0.0
+            gram[first] = 0.0
+            moment[first] = 0.0
         stamps = self._stamp[first:end]
         jump = None if self._break is None else stamps - self._break
         maps = self._position_map(stamps - reference, jump)
@@ -480,11 +596,10 @@ class TrajectoryFuser(GatedEstimator):
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
         rhs = self._rhs[first:end] * weight[:, :, 0]
         np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
-                  out=self._prefix_gram[first + 1:end + 1])
-        self._prefix_gram[first + 1:end + 1] += self._prefix_gram[first]
-        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0,
-                  out=self._prefix_moment[first + 1:end + 1])
-        self._prefix_moment[first + 1:end + 1] += self._prefix_moment[first]
+                  out=gram[first + 1:end + 1])
+        gram[first + 1:end + 1] += gram[first]
+        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0, out=moment[first + 1:end + 1])
+        moment[first + 1:end + 1] += moment[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -542,8 +657,10 @@ class TrajectoryFuser(GatedEstimator):
         """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
         stamp, index, rows, rhs, _ = frame
         if prediction is None or self._break_range is not None or \
-                self._sigma_count < _SIGMA_MATURE:
-            return 'ok'  # no path yet, an impact being placed, or the noise not known yet
+                self._sigma_count < _SIGMA_MATURE or self._end - self._start < _GATE_SUPPORT:
+            # No path yet, an impact being placed, the noise not known yet, or a path from
+            # too few frames to judge a detection by (a flight's first frames).
+            return 'ok'
         point, covariance = prediction
         found = self._innovation(index, rows, rhs, point)
         statistic = math.inf
@@ -587,8 +704,11 @@ class TrajectoryFuser(GatedEstimator):
             if self._confirm_break(frame):
                 return 'inserted'
             # Two detections in a row off the path and not explained by an impact: the path
-            # is lost (or was wrong). Start it afresh from them, as at a new flight.
+            # is lost (or was wrong). Start it afresh from them, as at a new flight; the
+            # estimates of the lost path no longer bound where the ball can be (a new ball
+            # served before the rig paused).
             self._restart()
+            self.plausibility.reset()
             self._insert(pending)
             self._insert(frame)
             self.stats['restarts'] += 1
@@ -775,20 +895,23 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        sizes = _sizes(count) if self.order == 2 and count >= _WINDOWS[0] else \
-            np.array((count,))
+        quadratic = self.order == 2 and count >= _WINDOWS[0]
+        sizes = _sizes(count) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
-        shift = _EYE12[:unknowns, :unknowns].copy()
-        shift[_SHIFT_ROWS, _SHIFT_COLUMNS] = (-delta, delta * delta, -2.0 * delta) * 3
+        shift = self._shift[unknowns]
+        shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
+        shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
+        shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
         gram, moment = self._prefix_gram, self._prefix_moment
+        previous = end - sizes
         matrices = shift.T @ (gram[end, :unknowns, :unknowns]
-                              - gram[end - sizes, :unknowns, :unknowns]) @ shift
-        moments = (moment[end, :unknowns] - moment[end - sizes, :unknowns]) @ shift
+                              - gram[previous, :unknowns, :unknowns]) @ shift
+        moments = (moment[end, :unknowns] - moment[previous, :unknowns]) @ shift
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept: _Fits | None = None
-        if self.order == 2 and count >= _WINDOWS[0]:
+        if quadratic:
             if t_break is None:
                 kept = self._fits(matrices, moments, sizes, 9, position, index)
             else:
@@ -811,30 +934,74 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, points, covariances, solutions = kept
+        sizes, points, covariances, depths, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances * sigma2)
         beta, inverse = self._full(*solutions[chosen])
         point = points[chosen]
+        if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
+            # The model's order: the chosen window's constant velocity or free fall where
+            # its acceleration does not differ significantly from theirs.
+            lower = self._lower_order(beta, inverse, position, sigma2)
+            if lower is not None:
+                point, beta, inverse = lower
         self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
         if self._stamp[end - 1] == stamp:
-            # This frame's row in the event's coefficients: its residual for the impact gate
-            # and for the noise estimate.
+            # This frame's residual in the chosen fit (for the impact gate) and in the noise
+            # estimate's fixed-length fit; the frame's row maps the coefficients to the
+            # position at the event, so its residual and leverage need only that position
+            # and its covariance.
             weight = self._weight[end - 1]
             row = self._rows[end - 1] @ position * weight
             rhs = self._rhs[end - 1] * weight
             self._residual[index] = (stamp, self._segment,
                                      self._standardized(row, rhs, beta, inverse))
-            depth = float(self._rotation[index, 2] @ (point - self._center[index]))
-            self._depth[index] = depth
-            reference = np.nonzero(sizes >= _NOISE_WINDOW)[0]
-            if len(reference):
-                columns, reference_beta, reference_inverse = solutions[reference[0]]
-                self._measure_noise(stamp, index, row[:, columns], rhs, reference_beta,
-                                    reference_inverse)
+            self._depth[index] = float(self._rotation[index, 2] @ (point - self._center[index]))
+            reference = int(sizes.searchsorted(_NOISE_WINDOW))
+            if reference < len(sizes):
+                columns, reference_beta, reference_inverse = solutions[reference]
+                if isinstance(columns, int):
+                    columns = _COLUMNS[columns]
+                self._measure_noise(stamp, index, self._standardized(
+                    row[:, columns], rhs, reference_beta, reference_inverse))
         return point
+
+    def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
+                     sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """
+        Return a window's lower-order fit, if its acceleration fit does not reject it.
+
+        The candidates fix the acceleration: zero (a constant velocity) or the known
+        gravity :data:`GRAVITY_MPS2` along -z (a free fall).  Each is the acceleration
+        fit under a linear constraint, so its coefficients, their covariance and the
+        test (Wald's chi-square, 3 d.o.f., of the fitted acceleration against the fixed
+        one) follow from the acceleration fit's solution alone.  The candidate with the
+        smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
+        jump at an impact stays free.
+
+        :param beta: (12,) the acceleration fit's coefficients at the event
+        :param inverse: (12, 12) their covariance per px^2
+        :param position: (3, 12) map from the coefficients to the position at the event
+        :param sigma2: the detection noise's variance [px^2]
+        :return: (point (3,), beta (12,), inverse (12, 12)) of the lower-order fit, or None
+        """
+        gain = inverse[:, _ACCELERATION]  # (12, 3)
+        block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
+        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
+        try:
+            solved = np.linalg.solve(block, np.concatenate((offsets, gain.T), axis=1))
+        except np.linalg.LinAlgError:
+            return None
+        statistics = (offsets * solved[:, :2]).sum(axis=0) / sigma2
+        best = int(np.argmin(statistics))
+        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
+            return None
+        lower_beta = beta - gain @ solved[:, best]
+        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
+        lower_inverse = inverse - gain @ solved[:, 2:]
+        return position @ lower_beta, lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
@@ -866,22 +1033,30 @@ class TrajectoryFuser(GatedEstimator):
         """
         Solve window systems; keep the determined, well-conditioned ones.
 
-        :param matrices: (K, 12, 12) normal matrices at the event, ``moments`` (K, 12)
-        :param sizes: (K,) window sizes [frames]
+        :param matrices: (K, m, m) normal matrices at the event (m >= the unknowns),
+            ``moments`` (K, m)
+        :param sizes: (K,) window sizes [frames], ascending
         :param columns: the unknowns: a count (the first 9 or 12 coefficients) or an index
             array (already applied to ``matrices`` and ``moments``)
         :param position: (3, 12) map from the coefficients to the position at the event
         :param index: the event's camera
-        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, solutions)``
-            with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, depths (K,),
+            solutions)`` with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
         """
         if isinstance(columns, int):
-            count, columns = columns, np.arange(columns)
-            matrices, moments = matrices[:, :count, :count], moments[:, :count]
-        keep = 2 * sizes > len(columns)  # more equations than unknowns
-        if not keep.any():
+            count = columns
+            if matrices.shape[1] != count:
+                matrices, moments = matrices[:, :count, :count], moments[:, :count]
+            selector = position[:, :count]
+        else:
+            count = len(columns)
+            selector = position[:, columns]
+        # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
+        first = int(sizes.searchsorted(count // 2, side='right'))
+        if first == len(sizes):
             return None
-        sizes, matrices, moments = sizes[keep], matrices[keep], moments[keep]
+        if first:
+            sizes, matrices, moments = sizes[first:], matrices[first:], moments[first:]
         try:
             inverses = np.linalg.inv(matrices)
         except np.linalg.LinAlgError:
@@ -889,21 +1064,23 @@ class TrajectoryFuser(GatedEstimator):
         # A (numerically) singular system leaves M M^-1 far from the identity.
         unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
         betas = (inverses @ moments[:, :, None])[:, :, 0]
-        selector = position[:, columns]
         points = betas @ selector.T
         covariances = selector @ inverses @ selector.T
-        depth = (points - self._center[index]) @ self._rotation[index, 2]
+        depths = (points - self._center[index]) @ self._rotation[index, 2]
         variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
-        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depth > 0.0) & (variance > 0.0) & \
-            (variance <= limit * limit * depth * depth)
-        if not good.any():
-            return None
-        good = np.nonzero(good)[0]
-        return (sizes[good], points[good], covariances[good],
-                [(columns, betas[k], inverses[k]) for k in good])
+        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depths > 0.0) & (variance > 0.0) & \
+            (variance <= limit * limit * depths * depths)
+        if not good.all():
+            if not good.any():
+                return None
+            good = np.nonzero(good)[0]
+            sizes, points, covariances, depths = (sizes[good], points[good], covariances[good],
+                                                  depths[good])
+            betas, inverses = betas[good], inverses[good]
+        return sizes, points, covariances, depths, _Solutions(columns, betas, inverses)
 
     @staticmethod
     def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
@@ -912,48 +1089,35 @@ class TrajectoryFuser(GatedEstimator):
             return second if first is None else first
         sizes = np.concatenate((first[0], second[0]))
         order = np.argsort(sizes, kind='stable')
+        solutions = [first[4][k] for k in range(len(first[0]))] + \
+            [second[4][k] for k in range(len(second[0]))]
         return (sizes[order], np.concatenate((first[1], second[1]))[order],
                 np.concatenate((first[2], second[2]))[order],
-                [(first[3] + second[3])[k] for k in order])
+                np.concatenate((first[3], second[3]))[order],
+                [solutions[k] for k in order])
 
     @staticmethod
-    def _full(columns: np.ndarray, beta: np.ndarray,
+    def _full(columns: int | np.ndarray, beta: np.ndarray,
               inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return a solution as 12 coefficients and their (12, 12) covariance per px^2."""
+        """
+        Return a solution as coefficients and their covariance per px^2.
+
+        The first ``columns`` coefficients (9 or 12) or a subset (constant velocity), in
+        place among 12 (zeros elsewhere).
+        """
+        if isinstance(columns, int):
+            if columns == 12:
+                return beta, inverse
+            full_beta = np.zeros(12)
+            full_inverse = np.zeros((12, 12))
+            full_beta[:columns] = beta
+            full_inverse[:columns, :columns] = inverse
+            return full_beta, full_inverse
         full_beta = np.zeros(12)
         full_inverse = np.zeros((12, 12))
-        count = len(columns)
-        if columns[-1] == count - 1:  # the first ``count`` coefficients
-            full_beta[:count] = beta
-            full_inverse[:count, :count] = inverse
-        else:
-            full_beta[columns] = beta
-            full_inverse[np.ix_(columns, columns)] = inverse
+        full_beta[columns] = beta
+        full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
-
-    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
-        """Return the index of the longest window consistent with every shorter one."""
-        count = len(points)
-        if count == 1:
-            return 0
-        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
-        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
-        difference = points[None, :, :] - points[:, None, :]
-        first = covariances[0]
-        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
-        spread = covariances[:, None] - 0.9 * covariances[None, :] + ridge
-        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(2)
-        upper = _UPPER[:count, :count]  # j < k only
-        if (statistic[upper] <= 0.0).any():
-            # Not positive where the difference of covariances is not (windows with and
-            # without an impact are not nested models): the shorter window's covariance
-            # C_j bounds it.
-            shorter = np.einsum('jki,jil,jkl->jk', difference,
-                                np.linalg.inv(covariances + ridge), difference)
-            statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = (statistic > self.consistency) & upper
-        failing = np.nonzero(bad.any(axis=0))[0]
-        return int(failing[0] - 1) if len(failing) else count - 1
 
     @staticmethod
     def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
@@ -962,17 +1126,43 @@ class TrajectoryFuser(GatedEstimator):
         leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
         return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
 
-    def _measure_noise(self, stamp: int, index: int, row: np.ndarray, rhs: np.ndarray,
-                       beta: np.ndarray, inverse: np.ndarray) -> None:
+    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
+        """Return the index of the longest window consistent with every shorter one."""
+        count = len(points)
+        if count == 1:
+            return 0
+        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
+        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
+        # Only the pairs j < k are tested.
+        shorter_index, longer_index = _pairs(count)
+        difference = points[longer_index] - points[shorter_index]
+        first = covariances[0]
+        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
+        spread = covariances[shorter_index] - 0.9 * covariances[longer_index] + ridge
+        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(1)
+        if (statistic <= 0.0).any():
+            # Not positive where the difference of covariances is not (windows with and
+            # without an impact are not nested models): the shorter window's covariance
+            # C_j bounds it.
+            every = points[None, :, :] - points[:, None, :]
+            shorter = np.einsum('jki,jil,jkl->jk', every, np.linalg.inv(covariances + ridge),
+                                every)[shorter_index, longer_index]
+            statistic = np.where(statistic > 0.0, statistic, shorter)
+        bad = statistic > self.consistency
+        if not bad.any():
+            return count - 1
+        return int(longer_index[bad].min()) - 1
+
+    def _measure_noise(self, stamp: int, index: int, residual: np.ndarray) -> None:
         """
         Update the detection noise from the newest frame's residual (Rice's estimator).
 
-        The residual comes from a fit of fixed length (_NOISE_WINDOW frames): its
-        systematic part (the path's curvature beyond a parabola at the window's end,
-        a camera's calibration bias) is nearly the same at consecutive frames of a
-        camera and cancels in their difference; the noise does not.
+        The residual (standardized, (2,) [px]) comes from a fit of fixed length
+        (_NOISE_WINDOW frames): its systematic part (the path's curvature beyond a
+        parabola at the window's end, a camera's calibration bias) is nearly the same
+        at consecutive frames of a camera and cancels in their difference; the noise
+        does not.
         """
-        residual = self._standardized(row, rhs, beta, inverse)
         last = self._noise_residual.get(index)
         self._noise_residual[index] = (stamp, self._segment, residual)
         if last is not None and last[1] == self._segment and \

@@ -134,8 +134,9 @@ def test_sweep_every_case_covered_better_than_paper_and_bounded(sweep):
 
 
 @pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: measured geometric mean '
-                   '0.50x paper and worst case 0.97x (0.3 px noise, 30 fps spiral) on this '
-                   'sweep; see README, "Beyond the paper: the trajectory method"')
+                   '0.43x paper and worst case 0.97x (0.3 px noise, 30 fps spiral) on this '
+                   'sweep (the full 144 cases: 0.39x, worst 1.05x); see README, "Beyond the '
+                   'paper: the trajectory method"')
 def test_sweep_meets_the_issue_ratio_bars(sweep):
     summary = summarize(sweep)
     assert summary['geometric_mean_ratio'] <= 0.4
@@ -253,10 +254,10 @@ def test_real_data_within_the_oracle_floor(lfg_results, session):
     assert ours.available >= paper.available  # at least as many camera_3 events scored
 
 
-@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: 5 gross errors (> 20 px) '
-                   "against the oracle's 2 on the common events; three of them are 10-17 ms "
-                   'into a flight, where the oracle is at 15-18 px too')
 def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
+    # Gross errors (over 20 px) came at flight starts (the paper's estimate now stands in
+    # until the fit has six frames) and after a new ball served without a pause (the lost
+    # path's estimates no longer bound the new one's).
     ours = sum(int(np.sum(r['trajectory'].errors > 20.0)) for r in lfg_results.values())
     oracle = sum(int(np.sum(r['oracle'].errors > 20.0)) for r in lfg_results.values())
     assert ours <= 2 * oracle
@@ -275,3 +276,42 @@ def test_real_data_three_cameras_consistent_with_two(lfg, lfg_results):
         assert values['self_px'] < 1.0, (session, values)
         assert values['between_px'] <= two.median_px + values['self_px'], (session, values)
         assert values['events'] >= two.available, (session, values)
+
+
+def test_a_camera_back_from_a_silence_corrects_the_path_instead_of_being_judged_stray():
+    # A sweep case (60 fps spiral, jittered shutters, dropped detections) where camera2 is
+    # silent for 70 ms (longer than its max gap): meanwhile the path is fitted to camera1's
+    # rays and drifts along them, where camera1 cannot see.  camera2's detection when it
+    # comes back is fitted, not held: held, it was judged stray twice (camera1 agreed with
+    # the drifted path) and the estimates were 16-41 mm off for four events, where paper
+    # was at 1-2 mm.
+    case = Case('distorted', 60.0, 0.3, 0.0, True, 'spiral', seed=136)
+    cameras = make_rig(case.rig)
+    observations, truth_stamps, truth_points = simulate_case(case, cameras)
+    camera2 = np.array(sorted(o.stamp_ns for o in observations if o.camera == 'camera2'))
+    gaps = np.diff(camera2)
+    back = int(camera2[1:][np.argmax(gaps)])  # the end of camera2's longest silence
+    assert gaps.max() > 65_000_000
+    ours, stats = fuse(cameras, observations, method='trajectory')
+    assert stats['outlier'] == 0
+    after = [e for e in ours if back <= e.stamp_ns <= back + 40_000_000]
+    assert len(after) >= 4
+    index = np.searchsorted(truth_stamps, [e.stamp_ns for e in after])
+    errors = np.linalg.norm(positions_array(after) - truth_points[index], axis=1)
+    assert errors.max() < 0.005, errors
+
+
+def test_a_straight_line_keeps_the_lower_order_fit():
+    # A uniform straight line with 0.3 px noise: the velocity fit of the longest window
+    # agrees with its parabola and has 4/9 of its variance at the window's end (2/3 of the
+    # error).  Measured mean over three seeds: 0.42x paper; the acceleration fit alone
+    # gave 0.56x.
+    cameras = default_rig()
+    ratios = []
+    for seed in (1, 2, 3):
+        data = simulate_run(Run('straight', noise_px=0.3, seed=seed), cameras)
+        paper, _ = fuse(cameras, data.observations)
+        ours, _ = fuse(cameras, data.observations, method='trajectory')
+        ratios.append(score(ours, data.truth_stamps, data.truth_points).mae_mm
+                      / score(paper, data.truth_stamps, data.truth_points).mae_mm)
+    assert np.mean(ratios) < 0.48, ratios
