@@ -34,7 +34,8 @@ With ``warm_up_s`` (file and virtual sources, which wait for each frame's
 time) the detector runs once on the previous frame that long before the next
 is due and its result is dropped: after a frame period of sleep the caches
 are cold and a detection costs two to three times more, so this buys about
-0.4 ms per frame with about 0.4 ms of CPU per frame.
+0.4 ms per frame with about 0.4 ms of CPU per frame.  OpenCV runs in the
+capture thread alone (``opencv_threads: 1``).
 """
 
 from collections import Counter, deque
@@ -168,11 +169,20 @@ class CameraDetectorNode(Node):
                             'file and virtual: run the detector on the previous frame this '
                             'long before the next is due, to warm the caches [s]; 0: never',
                             min_value=0.0, max_value=0.1, read_only=True)
+        opencv_threads = declare(self, 'opencv_threads', 1,
+                                 "OpenCV's worker threads in this process (cv2.setNumThreads); "
+                                 '1: detection runs in the capture thread alone; 0: leave '
+                                 "OpenCV's default", min_value=0, max_value=64, read_only=True)
         diagnostics_period_s = declare(self, 'diagnostics_period_s', 1.0,
                                        'period of /diagnostics [s]; 0 disables', min_value=0.0,
                                        read_only=True)
 
         self.camera_name = name or self.get_namespace().rstrip('/').split('/')[-1] or 'camera'
+        if opencv_threads > 0:
+            # Process-wide. A search window is too small to share: handing half of it to a
+            # worker thread costs more than it saves, and on a busy machine the worker may not
+            # be scheduled for a while (the same detections either way).
+            cv2.setNumThreads(opencv_threads)
         self.calibration = self._calibration(calibration_file, source)
         try:
             if source == 'virtual':
