@@ -61,6 +61,7 @@ import copy
 import os
 from pathlib import Path
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -86,6 +87,7 @@ from ..rig import config_dir
 from ..sim.rendering import BallRenderer
 from ..sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe, shutter_stamps,
                              truth_at)
+from ..stamps import sec_nanosec_to_ns
 
 __all__ = ['bench_camera_detectors', 'hop_probe_main', 'main', 'print_camera_detector_rows',
            'transport_probe_main']
@@ -506,7 +508,12 @@ def bench_camera_detectors(seconds: float) -> dict:
         def timed_publish(publish):
             def wrapper(msg):
                 publish(msg)
-                arrivals['positions'].append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+                published_ns = time.time_ns()
+                # The fuser publishes serialized points (messages.point_encoder): the stamp is
+                # the int32 sec and uint32 nanosec after the 4-byte encapsulation header.
+                stamp_ns = (sec_nanosec_to_ns(*struct.unpack_from('<iI', msg, 4))
+                            if isinstance(msg, bytes) else stamp_to_ns(msg.header.stamp))
+                arrivals['positions'].append((stamp_ns, published_ns))
             return wrapper
 
         for subscription in fuser.subscriptions:
