@@ -319,10 +319,11 @@ class CameraDetectorNode(Node):
 
     def _on_frame(self, frame: Frame) -> None:
         # The point goes out first; the bookkeeping waits until it is published.
+        error = None
         try:
             found = self.detector.detect(frame.image, frame.encoding)
         except (EncodingError, ValueError, cv2.error) as err:
-            found = err
+            found, error = None, err
         else:
             if found is not None:
                 self._point_pub.publish(self._encode_point(frame.stamp_ns, found[0], found[1],
@@ -337,10 +338,10 @@ class CameraDetectorNode(Node):
                     'stamping with the time read() returned (later than the shutter by the '
                     'driver latency: set stamp_offset_s)')
             self._stamp_source = frame.stamp_source
-        if isinstance(found, Exception):
+        if error is not None:
             self._last_image = None
             self.stats['bad_image'] += 1
-            self.get_logger().error(f'frame dropped: {str(found).strip()}',
+            self.get_logger().error(f'frame dropped: {str(error).strip()}',
                                     throttle_duration_sec=5.0)
             return
         self._last_image = (frame.image, frame.encoding)
