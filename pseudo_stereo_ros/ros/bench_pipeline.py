@@ -116,7 +116,7 @@ def _stats(seconds) -> Tuple[float, float]:
 
 def _header() -> str:
     return (f'  {"quantity":<{_LABEL_WIDTH}s}{"n":>6s}{"median":>9s}{"p90":>9s}  '
-            f'{"target":<13s}{"ratio":>7s}')
+            f'{"target":<13s}{"ratio":>8s}')
 
 
 def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = None,
@@ -145,7 +145,7 @@ def _row(label: str, seconds: Sequence[float], *, target_ms: Optional[float] = N
         base = _stats(baseline)[0]
         ratio = f'{median / base:.2f}x' if base > 0 else 'n/a'
     return (f'  {label:<{_LABEL_WIDTH}s}{len(seconds):>6d}{median:>9.3f}{p90:>9.3f}  '
-            f'{target:<13s}{ratio:>7s}{extra}').rstrip()
+            f'{target:<13s}{ratio:>8s}{extra}').rstrip()
 
 
 def _frame_points(count: int) -> np.ndarray:
@@ -579,7 +579,7 @@ def _diagnostic_row(label: str, values: dict, key: str, *, target_ms: Optional[f
     if target_ms is not None:
         target = f'<= {target_ms:g} ' + ('ok' if median <= target_ms else 'OVER')
     return (f'  {label:<{_LABEL_WIDTH}s}{n:>6d}{median:>9.3f}{p90:>9.3f}  {target:<13s}'
-            f'{"":>7s}  p99 {p99:.3f}').rstrip()
+            f'{"":>8s}  p99 {p99:.3f}').rstrip()
 
 
 def print_camera_detector_rows(seconds: float) -> int:
