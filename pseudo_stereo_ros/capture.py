@@ -44,7 +44,11 @@ on; a source that fails (a camera unplugged, ``read()`` failing) is reported
 once per ``report_period_s`` while it fails, retried with a doubling back-off,
 and resumes by itself.  Frames of a live source older than ``max_frame_age_s``
 when read (a driver's queue after an outage) and frames not newer than the
-last one handed on are dropped and counted, so nothing stale goes out.
+last one handed on are dropped and counted, so nothing stale goes out.  With
+``warm_up`` it calls that ``warm_up_s`` before a frame is due, when the source
+waits for its frame's time (the file and virtual sources; a device blocks in
+the driver and gets none): a detector that last ran a frame period ago runs
+two to three times slower, its caches cold, than one run just before.
 A source has ``description``, ``live`` (frames come from the physical world
 now), ``is_open``, ``start() -> warnings`` (open it; :class:`CaptureError`
 when it cannot), ``read(wait) -> Frame or None`` (None: the end, or asked to
@@ -671,17 +675,23 @@ class CaptureLoop:
     :param retry_max_s: longest wait between retries [s]
     :param max_frame_age_s: frames of a live source older than this when read are dropped
         (``stale``) [s]
-    :param clock: monotonic clock [s] for the reports (injectable for tests)
+    :param warm_up: called ``warm_up_s`` before a frame is due, when the source waits for the
+        frame's time (``warm_ups`` counts the calls); None for none
+    :param warm_up_s: how long before the frame is due [s]
+    :param clock: monotonic clock [s] for the reports and the warm-up (injectable for tests)
     """
 
     def __init__(self, source: _Source, on_frame: Callable[[Frame], None], *,
                  report: Callable[[str, str], None] | None = None,
                  report_period_s: float = 1.0, retry_initial_s: float = 0.1,
                  retry_max_s: float = 2.0, max_frame_age_s: float = 0.5,
+                 warm_up: Callable[[], None] | None = None, warm_up_s: float = 0.002,
                  clock: Callable[[], float] = time.monotonic):
         if not (0 < retry_initial_s <= retry_max_s):
             raise CaptureError(f'need 0 < retry_initial_s <= retry_max_s, got '
                                f'{retry_initial_s}, {retry_max_s}')
+        if not (math.isfinite(warm_up_s) and warm_up_s >= 0):
+            raise CaptureError(f'warm_up_s: expected a time >= 0 s, got {warm_up_s!r}')
         self.source = source
         self.on_frame = on_frame
         self.report = report or (lambda level, text: None)
@@ -689,9 +699,11 @@ class CaptureLoop:
         self.retry_initial_s = float(retry_initial_s)
         self.retry_max_s = float(retry_max_s)
         self.max_frame_age_ns = int(max_frame_age_s * 1e9)
+        self.warm_up = warm_up
+        self.warm_up_s = float(warm_up_s)
         self.clock = clock
         #: Counts: ``frames`` read, ``delivered``, ``stale``, ``not_newer``, ``failures``,
-        #: ``reports``, ``recoveries``.
+        #: ``reports``, ``recoveries``, ``warm_ups``.
         self.stats: Counter[str] = Counter()
         self._failing_since: float | None = None
         self._outage_failures = 0
@@ -753,6 +765,24 @@ class CaptureLoop:
         self._outage_failures = 0
         self._last_report = None
 
+    def _waiter(self, stop: _Stop) -> Wait:
+        """Return the ``wait`` the source gets: ``stop.wait``, warming up before the end."""
+        if self.warm_up is None:
+            return stop.wait
+        warm_up = self.warm_up
+
+        def wait(seconds: float) -> bool:
+            if seconds <= self.warm_up_s:
+                return stop.wait(seconds)
+            end = self.clock() + seconds
+            if stop.wait(seconds - self.warm_up_s):
+                return True
+            warm_up()
+            self.stats['warm_ups'] += 1
+            return stop.wait(max(end - self.clock(), 0.0))
+
+        return wait
+
     def run(self, stop: _Stop) -> str:
         """
         Run until ``stop`` is set or the source ends.
@@ -761,6 +791,7 @@ class CaptureLoop:
             ``wait(seconds) -> bool``)
         :return: ``'stopped'`` or ``'ended'`` (a file or a non-looping scenario is over)
         """
+        wait = self._waiter(stop)
         while not stop.is_set():
             if not self.source.is_open:
                 try:
@@ -771,7 +802,7 @@ class CaptureLoop:
                     self._wait_to_retry(stop)
                     continue
             try:
-                frame = self.source.read(stop.wait)
+                frame = self.source.read(wait)
             except CaptureError as err:
                 self.source.release()
                 self._failed(err)

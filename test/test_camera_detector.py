@@ -311,6 +311,7 @@ def test_three_virtual_cameras_give_the_summed_rate_and_beat_every_pair(tmp_path
         fuser = nodes[0]
         assert isinstance(fuser, FuserNode)
         published = fuser.fuser.stats['estimates']
+        warm_ups = [d.capture_loop.stats['warm_ups'] for d in detectors]
     finally:
         executor.shutdown()
         for node in nodes + [probe]:
@@ -338,6 +339,8 @@ def test_three_virtual_cameras_give_the_summed_rate_and_beat_every_pair(tmp_path
     by_stamp = {e.stamp_ns: (e.x, e.y, e.z) for e in offline}
     np.testing.assert_allclose([p[1:] for p in positions], [by_stamp[p[0]] for p in positions],
                                rtol=0, atol=1e-9)
+    # (with the detectors warmed up before their frames: that changes no detection)
+    assert min(warm_ups) >= 10, warm_ups
 
     # ... and no worse than those of the best pair of cameras on the same detections.
     def error(estimates):

@@ -296,6 +296,37 @@ def test_capture_loop_drops_frames_not_newer_than_the_last():
 def test_capture_loop_rejects_bad_retry_options():
     with pytest.raises(CaptureError, match='retry'):
         CaptureLoop(None, print, retry_initial_s=3.0, retry_max_s=1.0)
+    with pytest.raises(CaptureError, match='warm_up_s'):
+        CaptureLoop(None, print, warm_up_s=-0.001)
+
+
+def test_capture_loop_warms_up_just_before_each_frame_is_due():
+    # ScriptedSource waits 1/30 s for every frame: the warm-up must come 2 ms before its end,
+    # inside the wait the source asked for, and the frame must not come any later for it.
+    clock = [0.0]
+    source = ScriptedSource(clock, lambda t: False)
+    frames, warm_ups = [], []
+    loop = CaptureLoop(source, frames.append, warm_up=lambda: warm_ups.append(clock[0]),
+                       warm_up_s=0.002, clock=lambda: clock[0])
+    stop = FakeStop(clock, until_s=0.5)
+    assert loop.run(stop) == 'stopped'
+    # Every frame but the last, whose wait the stop ended before its warm-up.
+    assert len(frames) >= 14 and loop.stats['warm_ups'] == len(warm_ups) == len(frames) - 1
+    for warm_up_s, frame in zip(warm_ups, frames):
+        assert abs(frame.stamp_ns / 1e9 - 0.002 - warm_up_s) < 1e-6
+    # The waits add up to the source's: 1/30 s per frame, split at the warm-up.
+    np.testing.assert_allclose(sum(stop.waits), clock[0])
+    np.testing.assert_allclose(stop.waits[:2], [1 / 30 - 0.002, 0.002])
+
+
+def test_capture_loop_without_warm_up_passes_the_waits_through():
+    clock = [0.0]
+    loop = CaptureLoop(ScriptedSource(clock, lambda t: False), lambda frame: None,
+                       clock=lambda: clock[0])
+    stop = FakeStop(clock, until_s=0.2)
+    loop.run(stop)
+    np.testing.assert_allclose(stop.waits, 1 / 30)
+    assert loop.stats['warm_ups'] == 0
 
 
 def test_device_loop_through_a_fake_outage_resumes_with_fresh_stamps():

@@ -18,9 +18,11 @@ import subprocess
 import sys
 
 import cv2
+from hypothesis import given, strategies as st
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
-from pseudo_stereo_ros.detection import BallDetector, ENCODING_CHANNELS, EncodingError, image_array
+from pseudo_stereo_ros.detection import (_median_of_integers, BallDetector, ENCODING_CHANNELS,
+                                         EncodingError, image_array)
 from pseudo_stereo_ros.sim.rendering import BallRenderer
 from pseudo_stereo_ros.sim.scenarios import default_rig, look_at_calibration
 import pytest
@@ -165,6 +167,31 @@ def test_search_window_matches_full_frame_and_falls_back():
     assert windowed.stats['window_hits'] == 5
     assert windowed.stats['window_misses'] == 1  # the jump: found again in the full frame
     assert windowed.stats['detections'] == len(path)
+
+
+@given(st.lists(st.integers(0, 255), min_size=1, max_size=80))
+def test_ring_median_is_numpys_median_exactly(values):
+    # The background level of the centroid: exactly np.median, so detections do not change.
+    signal = np.array(values, dtype=np.float32)
+    assert _median_of_integers(signal) == float(np.median(signal))
+
+
+def test_warm_up_changes_neither_state_nor_results():
+    camera = _camera()
+    renderer = BallRenderer(camera, radius_m=0.03, noise_std=2.0, seed=5)
+    images = [renderer.render((x, 0.1, 1.0)) for x in np.linspace(-0.4, 0.4, 8)]
+    plain, warmed = BallDetector(search_window_px=40), BallDetector(search_window_px=40)
+    assert not warmed.warm_up(images[0])  # no last position: no full-frame search
+    previous = None
+    for image in images:
+        if previous is not None:
+            last, stats = warmed.last, dict(warmed.stats)
+            assert warmed.warm_up(previous)
+            assert warmed.last == last and dict(warmed.stats) == stats
+        assert warmed.detect(image) == plain.detect(image)
+        previous = image
+    assert warmed.stats == plain.stats
+    assert not BallDetector(search_window_px=0).warm_up(images[0])
 
 
 def test_invalid_parameters_are_named():

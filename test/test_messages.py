@@ -16,15 +16,18 @@
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PointStamped
+from hypothesis import given, strategies as st
 import numpy as np
 from pseudo_stereo_ros.records import Estimate, Observation
 from pseudo_stereo_ros.ros.messages import (
     array_to_image, calibration_to_camera_info, diagnostic_array, diagnostic_status,
-    ENCODING_CHANNELS, EncodingError, estimate_to_point, image_point, image_to_array,
-    ns_to_stamp, observation_to_point, point_to_observation, point_to_xyz, stamp_to_ns,
-    trail_marker)
+    ENCODING_CHANNELS, EncodingError, estimate_to_point, fill_point, image_point,
+    image_to_array, ns_to_stamp, observation_to_point, point_encoder, point_to_observation,
+    point_to_xyz, stamp_to_ns, trail_marker)
 from pseudo_stereo_ros.sim.scenarios import DEFAULT_EPOCH_NS, default_rig
 import pytest
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import Marker
 
@@ -57,6 +60,22 @@ def test_image_point_keeps_the_image_header():
     msg = image_point(image.header, 1.25, 2.5)
     assert msg.header == image.header
     assert (msg.point.x, msg.point.y, msg.point.z) == (1.25, 2.5, 0.0)
+
+
+@given(frame_id=st.text(max_size=20).filter(lambda text: '\0' not in text),
+       stamp_ns=st.integers(0, 2 ** 31 * 10 ** 9 - 1),
+       xyz=st.tuples(*[st.floats(allow_nan=False, width=64)] * 3))
+def test_encoded_point_is_what_rclpy_serializes(frame_id, stamp_ns, xyz):
+    encoded = point_encoder(frame_id)(stamp_ns, *xyz)
+    expected = serialize_message(fill_point(PointStamped(), stamp_ns, frame_id, *xyz))
+    # Byte for byte but the alignment padding before the doubles (rclpy leaves it unset).
+    string_end = 4 + 8 + 4 + len(frame_id.encode()) + 1
+    assert len(encoded) == len(expected)
+    assert encoded[:string_end] == expected[:string_end]
+    assert encoded[-24:] == expected[-24:]
+    msg = deserialize_message(encoded, PointStamped)
+    assert msg.header.frame_id == frame_id
+    assert point_to_xyz(msg) == (stamp_ns, *xyz)
 
 
 def test_estimate_to_point():
