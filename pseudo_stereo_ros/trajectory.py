@@ -128,6 +128,7 @@ later judged stray; their event already counted as an estimate or a drop).
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 import math
@@ -234,8 +235,8 @@ _IMPACT_REACH = 5.0
 _Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
 # A path: (reference stamp [ns], beta (12,), covariance (12, 12) per px^2, impact stamp or None).
 _Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
-# A camera's residual: (stamp [ns], segment, standardized residual (2,) [px]).
-_Residual: TypeAlias = tuple[int, int, np.ndarray]
+# A camera's residual: (stamp [ns], segment, standardized residual (two floats) [px]).
+_Residual: TypeAlias = tuple[int, int, tuple[float, float]]
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
 _Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
 
@@ -253,14 +254,14 @@ class _Solutions:
         return self.columns, self.betas[k], self.inverses[k]
 
 
-# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), depths (K,), solutions).
-_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                         _Solutions | list[_Solution]]
+# Solved windows: (sizes, points (3 floats each), covariances (3 x 3 nested lists), solutions).
+_Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
-_COLUMNS = {9: np.arange(9), 12: np.arange(12)}
-_EYE3 = np.eye(3)
-_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+# Where x, y, z at the event are among the coefficients: of tau^0 per axis, and the same
+# among the constant velocity's.
+_PICKS = np.array((0, 3, 6))
+_CV_PICKS = np.array((0, 2, 4))
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -271,12 +272,48 @@ def _sizes(count: int) -> np.ndarray:
     return sizes
 
 
-def _pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return the index pairs (j, k), j < k, of ``count`` windows: (shorter, longer)."""
-    pairs = _PAIRS.get(count)
-    if pairs is None:
-        pairs = _PAIRS[count] = np.triu_indices(count, 1)
-    return pairs
+def _inverse_form(x: float, y: float, z: float, a: float, b: float, c: float, e: float,
+                  f: float, i: float) -> float:
+    """
+    Return ``d^T S^-1 d`` for ``d = (x, y, z)`` and a symmetric ``S`` (zero if singular).
+
+    ``S`` has the rows (a b c), (b e f), (c f i).
+    """
+    # The adjugate's entries (S^-1 = adjugate / determinant).
+    adj_a, adj_b, adj_c = e * i - f * f, c * f - b * i, b * f - c * e
+    adj_e, adj_f, adj_i = a * i - c * c, b * c - a * f, a * e - b * b
+    determinant = a * adj_a + b * adj_b + c * adj_c
+    if determinant == 0.0:
+        return 0.0
+    return (x * x * adj_a + y * y * adj_e + z * z * adj_i
+            + 2.0 * (x * y * adj_b + x * z * adj_c + y * z * adj_f)) / determinant
+
+
+def _standardized(rows: list, rhs: list, weight: float, point: list,
+                  covariance: list) -> tuple[float, float]:
+    """
+    Return a frame's residual (two floats) [px] over sqrt(1 - leverage) in a fit.
+
+    The frame's design rows are ``weight * rows @ position`` (position: the map from the
+    fit's coefficients to the position at the frame's stamp), so its residual and leverage
+    need only the fitted position there and its covariance.
+
+    :param rows: the frame's rows (2 x 3), ``rhs`` their right-hand sides (2)
+    :param weight: the frame's weight [px/m]
+    :param point: the fitted position (3) [m] at the frame's stamp
+    :param covariance: its covariance per px^2 (3 x 3)
+    """
+    x, y, z = point
+    (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = covariance
+    (a0, a1, a2), (b0, b1, b2) = rows
+    quadratic = (a0 * (c00 * a0 + c01 * a1 + c02 * a2) + a1 * (c10 * a0 + c11 * a1 + c12 * a2)
+                 + a2 * (c20 * a0 + c21 * a1 + c22 * a2)
+                 + b0 * (c00 * b0 + c01 * b1 + c02 * b2) + b1 * (c10 * b0 + c11 * b1 + c12 * b2)
+                 + b2 * (c20 * b0 + c21 * b1 + c22 * b2))
+    leverage = min(0.95, weight * weight * quadratic / 2.0)
+    scale = math.sqrt(1.0 - leverage)
+    return (weight * (a0 * x + a1 * y + a2 * z - rhs[0]) / scale,
+            weight * (b0 * x + b1 * y + b2 * z - rhs[1]) / scale)
 
 
 class TrajectoryFuser(GatedEstimator):
@@ -357,6 +394,7 @@ class TrajectoryFuser(GatedEstimator):
         # R @ centre per camera (plain floats): a detection's right-hand sides without numpy.
         self._rotated_center = [tuple(float(v) for v in rotation @ center)
                                 for rotation, center in zip(self._rotation, self._center)]
+        self._center_rows = [tuple(float(v) for v in center) for center in self._center]
         self._focal = np.array([math.sqrt(abs(camera.K[0, 0] * camera.K[1, 1]))
                                 for camera in cameras])
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
@@ -906,9 +944,9 @@ class TrajectoryFuser(GatedEstimator):
         shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
         gram, moment = self._prefix_gram, self._prefix_moment
         previous = end - sizes
-        matrices = shift.T @ (gram[end, :unknowns, :unknowns]
-                              - gram[previous, :unknowns, :unknowns]) @ shift
-        moments = (moment[end, :unknowns] - moment[previous, :unknowns]) @ shift
+        matrices = shift.T @ (gram[end] - gram.take(previous, axis=0))[
+            :, :unknowns, :unknowns] @ shift
+        moments = (moment[end] - moment.take(previous, axis=0))[:, :unknowns] @ shift
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept: _Fits | None = None
         if quadratic:
@@ -934,17 +972,18 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, points, covariances, depths, solutions = kept
+        sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
-        chosen = self._lepski(points, covariances * sigma2)
+        chosen = self._lepski(points, covariances, sigma2)
         beta, inverse = self._full(*solutions[chosen])
-        point = points[chosen]
+        point, covariance = points[chosen], covariances[chosen]
         if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
             # The model's order: the chosen window's constant velocity or free fall where
             # its acceleration does not differ significantly from theirs.
             lower = self._lower_order(beta, inverse, position, sigma2)
             if lower is not None:
                 point, beta, inverse = lower
+                covariance = (position @ inverse @ position.T).tolist()
         self._path = (stamp, beta, inverse, t_break)
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
@@ -953,19 +992,18 @@ class TrajectoryFuser(GatedEstimator):
             # estimate's fixed-length fit; the frame's row maps the coefficients to the
             # position at the event, so its residual and leverage need only that position
             # and its covariance.
-            weight = self._weight[end - 1]
-            row = self._rows[end - 1] @ position * weight
-            rhs = self._rhs[end - 1] * weight
+            weight = float(self._weight[end - 1])
+            rows = self._rows[end - 1].tolist()
+            rhs = self._rhs[end - 1].tolist()
             self._residual[index] = (stamp, self._segment,
-                                     self._standardized(row, rhs, beta, inverse))
-            self._depth[index] = float(self._rotation[index, 2] @ (point - self._center[index]))
-            reference = int(sizes.searchsorted(_NOISE_WINDOW))
+                                     _standardized(rows, rhs, weight, point, covariance))
+            (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+            self._depth[index] = (point[0] - c0) * d0 + (point[1] - c1) * d1 + \
+                (point[2] - c2) * d2
+            reference = bisect.bisect_left(sizes, _NOISE_WINDOW)
             if reference < len(sizes):
-                columns, reference_beta, reference_inverse = solutions[reference]
-                if isinstance(columns, int):
-                    columns = _COLUMNS[columns]
-                self._measure_noise(stamp, index, self._standardized(
-                    row[:, columns], rhs, reference_beta, reference_inverse))
+                self._measure_noise(stamp, index, _standardized(
+                    rows, rhs, weight, points[reference], covariances[reference]))
         return point
 
     def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
@@ -1001,7 +1039,7 @@ class TrajectoryFuser(GatedEstimator):
         lower_beta = beta - gain @ solved[:, best]
         lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
         lower_inverse = inverse - gain @ solved[:, 2:]
-        return position @ lower_beta, lower_beta, lower_inverse
+        return (position @ lower_beta).tolist(), lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1040,17 +1078,23 @@ class TrajectoryFuser(GatedEstimator):
             array (already applied to ``matrices`` and ``moments``)
         :param position: (3, 12) map from the coefficients to the position at the event
         :param index: the event's camera
-        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, depths (K,),
-            solutions)`` with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        :return: ``(sizes, points, covariances per px^2, solutions)``: the kept windows'
+            sizes, positions at the event (3 floats each) and their covariances (3 x 3
+            nested lists), with ``solutions[k] = (columns, beta (m,), inverse (m, m))``;
+            or None
         """
         if isinstance(columns, int):
             count = columns
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]
             selector = position[:, :count]
+            # At the event the position is the coefficients of tau^0, unless the velocity
+            # jump of an impact before it enters (the 12-coefficient fits).
+            picks = _PICKS if count == 9 or not position[0, 9] else None
         else:
             count = len(columns)
             selector = position[:, columns]
+            picks = _CV_PICKS
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
         first = int(sizes.searchsorted(count // 2, side='right'))
         if first == len(sizes):
@@ -1063,38 +1107,48 @@ class TrajectoryFuser(GatedEstimator):
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
         unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
-        betas = (inverses @ moments[:, :, None])[:, :, 0]
-        points = betas @ selector.T
-        covariances = selector @ inverses @ selector.T
-        depths = (points - self._center[index]) @ self._rotation[index, 2]
-        variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
+        errors = np.abs(unit - 1.0).max(axis=1).tolist()
+        betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
+        if picks is None:
+            points = (betas @ selector.T).tolist()
+            covariances = (selector @ inverses @ selector.T).tolist()
+        else:
+            points = betas[:, picks].tolist()
+            covariances = inverses[:, picks[:, None], picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
-        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depths > 0.0) & (variance > 0.0) & \
-            (variance <= limit * limit * depths * depths)
-        if not good.all():
-            if not good.any():
-                return None
-            good = np.nonzero(good)[0]
-            sizes, points, covariances, depths = (sizes[good], points[good], covariances[good],
-                                                  depths[good])
+        limit2 = limit * limit
+        (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+        good = []
+        for k, ((x, y, z), covariance, error) in enumerate(zip(points, covariances, errors)):
+            depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
+            variance = covariance[0][0] + covariance[1][1] + covariance[2][2]
+            if error < 1e-6 and depth > 0.0 and 0.0 < variance <= limit2 * depth * depth:
+                good.append(k)
+        if not good:
+            return None
+        sizes = sizes.tolist()
+        if len(good) < len(sizes):
+            sizes = [sizes[k] for k in good]
+            points = [points[k] for k in good]
+            covariances = [covariances[k] for k in good]
             betas, inverses = betas[good], inverses[good]
-        return sizes, points, covariances, depths, _Solutions(columns, betas, inverses)
+        return sizes, points, covariances, _Solutions(columns, betas, inverses)
 
     @staticmethod
     def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
         """Merge two results of :meth:`_fits` in order of window size."""
         if first is None or second is None:
             return second if first is None else first
-        sizes = np.concatenate((first[0], second[0]))
-        order = np.argsort(sizes, kind='stable')
-        solutions = [first[4][k] for k in range(len(first[0]))] + \
-            [second[4][k] for k in range(len(second[0]))]
-        return (sizes[order], np.concatenate((first[1], second[1]))[order],
-                np.concatenate((first[2], second[2]))[order],
-                np.concatenate((first[3], second[3]))[order],
-                [solutions[k] for k in order])
+        sizes = first[0] + second[0]
+        order = sorted(range(len(sizes)), key=sizes.__getitem__)  # stable
+        points = first[1] + second[1]
+        covariances = first[2] + second[2]
+        solutions = [first[3][k] for k in range(len(first[0]))] + \
+            [second[3][k] for k in range(len(second[0]))]
+        return ([sizes[k] for k in order], [points[k] for k in order],
+                [covariances[k] for k in order], [solutions[k] for k in order])
 
     @staticmethod
     def _full(columns: int | np.ndarray, beta: np.ndarray,
@@ -1119,45 +1173,51 @@ class TrajectoryFuser(GatedEstimator):
         full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
 
-    @staticmethod
-    def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
-                      inverse: np.ndarray) -> np.ndarray:
-        """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
-        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
-        return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
+    def _lepski(self, points: list, covariances: list, sigma2: float) -> int:
+        """
+        Return the index of the longest window consistent with every shorter one.
 
-    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
-        """Return the index of the longest window consistent with every shorter one."""
+        :param points: the windows' positions (3 floats each), shortest window first
+        :param covariances: their covariances per px^2 (3 x 3 nested lists)
+        :param sigma2: the detection noise's variance [px^2]
+        """
         count = len(points)
         if count == 1:
             return 0
-        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
-        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
-        # Only the pairs j < k are tested.
-        shorter_index, longer_index = _pairs(count)
-        difference = points[longer_index] - points[shorter_index]
+        # The difference X_k - X_j of nested fits of one model has the covariance C_j - C_k
+        # (X_k the more efficient); 0.9 C_k keeps the matrix positive.  Windows are tested
+        # from the shortest: the first longer window k inconsistent with a shorter one ends
+        # the search at k - 1.
         first = covariances[0]
-        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
-        spread = covariances[shorter_index] - 0.9 * covariances[longer_index] + ridge
-        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(1)
-        if (statistic <= 0.0).any():
-            # Not positive where the difference of covariances is not (windows with and
-            # without an impact are not nested models): the shorter window's covariance
-            # C_j bounds it.
-            every = points[None, :, :] - points[:, None, :]
-            shorter = np.einsum('jki,jil,jkl->jk', every, np.linalg.inv(covariances + ridge),
-                                every)[shorter_index, longer_index]
-            statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = statistic > self.consistency
-        if not bad.any():
-            return count - 1
-        return int(longer_index[bad].min()) - 1
+        ridge = 1e-12 * sigma2 * (first[0][0] + first[1][1] + first[2][2])
+        consistency = self.consistency
+        for k in range(1, count):
+            xk, yk, zk = points[k]
+            (l00, l01, l02), (_, l11, l12), (_, _, l22) = covariances[k]
+            for j in range(k):
+                xj, yj, zj = points[j]
+                (s00, s01, s02), (_, s11, s12), (_, _, s22) = covariances[j]
+                dx, dy, dz = xk - xj, yk - yj, zk - zj
+                statistic = _inverse_form(
+                    dx, dy, dz, sigma2 * (s00 - 0.9 * l00) + ridge, sigma2 * (s01 - 0.9 * l01),
+                    sigma2 * (s02 - 0.9 * l02), sigma2 * (s11 - 0.9 * l11) + ridge,
+                    sigma2 * (s12 - 0.9 * l12), sigma2 * (s22 - 0.9 * l22) + ridge)
+                if statistic <= 0.0:
+                    # Not positive where the difference of covariances is not (windows with
+                    # and without an impact are not nested models): the shorter window's
+                    # covariance C_j bounds it.
+                    statistic = _inverse_form(
+                        dx, dy, dz, sigma2 * s00 + ridge, sigma2 * s01, sigma2 * s02,
+                        sigma2 * s11 + ridge, sigma2 * s12, sigma2 * s22 + ridge)
+                if statistic > consistency:
+                    return k - 1
+        return count - 1
 
-    def _measure_noise(self, stamp: int, index: int, residual: np.ndarray) -> None:
+    def _measure_noise(self, stamp: int, index: int, residual: tuple[float, float]) -> None:
         """
         Update the detection noise from the newest frame's residual (Rice's estimator).
 
-        The residual (standardized, (2,) [px]) comes from a fit of fixed length
+        The residual (standardized, two floats [px]) comes from a fit of fixed length
         (_NOISE_WINDOW frames): its systematic part (the path's curvature beyond a
         parabola at the window's end, a camera's calibration bias) is nearly the same
         at consecutive frames of a camera and cancels in their difference; the noise
@@ -1167,11 +1227,11 @@ class TrajectoryFuser(GatedEstimator):
         self._noise_residual[index] = (stamp, self._segment, residual)
         if last is not None and last[1] == self._segment and \
                 stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
-            change = residual - last[2]
+            change_x, change_y = residual[0] - last[2][0], residual[1] - last[2][1]
             # Two axes, difference of two residuals: sample ~ sigma^2 * Exp(1), whose log has
             # mean log(sigma^2) - Euler's gamma. Averaging logs keeps rare large samples (a
             # curve the fit missed) from inflating the estimate.
-            sample = float(change @ change) / 4.0
+            sample = (change_x * change_x + change_y * change_y) / 4.0
             if sample > 0.0:
                 self._sigma_count += 1
                 alpha = max(_SIGMA_ALPHA, 1.0 / self._sigma_count)
