@@ -180,6 +180,7 @@ DROP_REASONS = {
 _SCALE_NS = 100_000_000
 # Window sizes [frames], nested, newest first; the largest bounds the work per event.
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
+_LONGEST = int(_WINDOWS[-1])
 # Frames kept (room for late observations).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
@@ -233,8 +234,9 @@ _IMPACT_REACH = 5.0
 
 # A detection to fit: (stamp [ns], camera index, rows (2, 3), right-hand sides (2,), weight).
 _Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
-# A path: (reference stamp [ns], beta (12,), covariance (12, 12) per px^2, impact stamp or None).
-_Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
+# A path: (reference stamp [ns], beta (m,), covariance (m, m) per px^2 (m = 9 without the
+# jump's coefficients, or 12), impact stamp or None, beta as 12 floats).
+_Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None, list[float]]
 # A camera's residual: (stamp [ns], segment, standardized residual (two floats) [px]).
 _Residual: TypeAlias = tuple[int, int, tuple[float, float]]
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
@@ -258,10 +260,6 @@ class _Solutions:
 _Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
-# Where x, y, z at the event are among the coefficients: of tau^0 per axis, and the same
-# among the constant velocity's.
-_PICKS = np.array((0, 3, 6))
-_CV_PICKS = np.array((0, 2, 4))
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -397,6 +395,7 @@ class TrajectoryFuser(GatedEstimator):
         self._center_rows = [tuple(float(v) for v in center) for center in self._center]
         self._focal = np.array([math.sqrt(abs(camera.K[0, 0] * camera.K[1, 1]))
                                 for camera in cameras])
+        self._focal_list = self._focal.tolist()
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
         self._depth = np.full(len(cameras), max(baseline, 1e-3))
@@ -443,8 +442,9 @@ class TrajectoryFuser(GatedEstimator):
         self._last: dict[str, int] = {}  # camera name -> its newest stamp
         self._path: _Path | None = None  # the path of the newest estimate
         self._pending: _Frame | None = None  # a detection not fitted yet
-        # Its innovation (2,) [px] against the path (None when its depth was not positive).
-        self._pending_innovation: np.ndarray | None = None
+        # Its innovation (two floats) [px] against the path (None when its depth was not
+        # positive).
+        self._pending_innovation: tuple[float, float] | None = None
         self._break: int | None = None  # stamp of the impact inside the window [ns], or None
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
@@ -454,7 +454,7 @@ class TrajectoryFuser(GatedEstimator):
         # Camera index -> its newest residual in the fit.
         self._residual: dict[int, _Residual] = {}
         # Camera index -> (stamp, innovation or None) of its last detection taken as an outlier.
-        self._rejected: dict[int, tuple[int, np.ndarray | None]] = {}
+        self._rejected: dict[int, tuple[int, tuple[float, float] | None]] = {}
         # Camera index -> stamp of its detection before the newest (None: it had none).
         self._previous: dict[int, int | None] = {}
         # Camera index -> the same as _residual from the noise estimate's fixed-length fit.
@@ -513,24 +513,24 @@ class TrajectoryFuser(GatedEstimator):
         the returning camera's detections stray.
         """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
-        rows = np.array(((a0 - x * c0, a1 - x * c1, a2 - x * c2),
-                         (b0 - y * c0, b1 - y * c1, b2 - y * c2)))
         r0, r1, r2 = self._rotated_center[index]
+        equations = ((a0 - x * c0, a1 - x * c1, a2 - x * c2),
+                     (b0 - y * c0, b1 - y * c1, b2 - y * c2), (r0 - x * r2, r1 - y * r2))
         depth = self._depth[index]
         prediction = None
         if self._path is not None:
-            prediction = self._predict(stamp)
-            predicted = float(self._rotation[index, 2] @ prediction[0]) - r2
+            prediction = self._predict_point(stamp)
+            predicted = c0 * prediction[0] + c1 * prediction[1] + c2 * prediction[2] - r2
             if predicted > 0.0:
                 depth = predicted
-        frame: _Frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
+        frame: _Frame = (stamp, index, np.array(equations[:2]), np.array(equations[2]),
                          self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
             self._pending = None  # the path is corrected by this detection, not judged
         else:
-            verdict = self._check(frame, prediction)
+            verdict = self._check(frame, prediction, equations)
             if verdict == 'pending':
                 return self._pending_estimate(frame)
             if verdict == 'inserted':
@@ -591,13 +591,15 @@ class TrajectoryFuser(GatedEstimator):
         self._rows[position] = rows
         self._rhs[position] = rhs
         self._weight[position] = weight
-        self._end = end + 1
-        start = max(self._start, self._end - int(_WINDOWS[-1]))
-        start += int(np.searchsorted(self._stamp[start:self._end],
-                                     self._stamp[self._end - 1] - self.max_window_ns))
-        self._start = min(start, self._end - 1)
-        if self._reference is None or \
-                self._stamp[self._end - 1] - self._reference > self.max_window_ns + _REANCHOR_NS:
+        self._end = end = end + 1
+        start = max(self._start, end - _LONGEST)
+        newest = int(self._stamp[end - 1])
+        oldest = newest - self.max_window_ns
+        stamps = self._stamp
+        while start < end and stamps[start] < oldest:  # usually one step at most
+            start += 1
+        self._start = min(start, end - 1)
+        if self._reference is None or newest - self._reference > self.max_window_ns + _REANCHOR_NS:
             self._reference = int(self._stamp[self._start])
             rebuild = self._start
         if rebuild is None:
@@ -613,16 +615,19 @@ class TrajectoryFuser(GatedEstimator):
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
             tau = (stamp - reference) / _SCALE_NS
-            weight = self._weight[first]
-            rows = self._rows[first]
-            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau.
-            design = np.zeros((2, 12))
-            design[:, :9] = (rows[:, :, None] * (1.0, tau, tau * tau)).reshape(2, 9)
+            powers = (1.0, tau, tau * tau)
+            weight = float(self._weight[first])
+            jump = None
             if self._break is not None and stamp > self._break:
-                design[:, 9:] = rows * ((stamp - self._break) / _SCALE_NS)
-            design *= weight
-            gram[end] = gram[first] + design.T @ design
-            moment[end] = moment[first] + (self._rhs[first] * weight) @ design
+                jump = (stamp - self._break) / _SCALE_NS
+            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau, then
+            # the jump's columns.
+            design = np.array([[value * power * weight for value in row for power in powers]
+                               + ([0.0] * 3 if jump is None else
+                                  [value * jump * weight for value in row])
+                               for row in self._rows[first].tolist()])
+            np.add(gram[first], design.T @ design, out=gram[end])
+            np.add(moment[first], (self._rhs[first] * weight) @ design, out=moment[end])
             return
         if first == self._start:
             gram[first] = 0.0
@@ -633,8 +638,7 @@ class TrajectoryFuser(GatedEstimator):
         weight = self._weight[first:end, None, None]
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
         rhs = self._rhs[first:end] * weight[:, :, 0]
-        np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
-                  out=gram[first + 1:end + 1])
+        np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=gram[first + 1:end + 1])
         gram[first + 1:end + 1] += gram[first]
         np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0, out=moment[first + 1:end + 1])
         moment[first + 1:end + 1] += moment[first]
@@ -675,9 +679,23 @@ class TrajectoryFuser(GatedEstimator):
     def _predict(self, stamp: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
         assert self._path is not None, 'predictions are made only once a path was fitted'
-        t_ref, beta, covariance, t_break = self._path
+        t_ref, beta, covariance, t_break, _ = self._path
         row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        row = row[:, :len(beta)]
         return row @ beta, row @ covariance @ row.T
+
+    def _predict_point(self, stamp: int) -> tuple[float, float, float]:
+        """Return the predicted position [m] as floats (the fast path of :meth:`_predict`)."""
+        assert self._path is not None, 'predictions are made only once a path was fitted'
+        t_ref, _, _, t_break, coefficients = self._path
+        tau = (stamp - t_ref) / _SCALE_NS
+        tau2 = tau * tau
+        x0, x1, x2, y0, y1, y2, z0, z1, z2, jx, jy, jz = coefficients
+        x, y, z = x0 + x1 * tau + x2 * tau2, y0 + y1 * tau + y2 * tau2, z0 + z1 * tau + z2 * tau2
+        if t_break is not None and stamp > t_break:
+            jump = (stamp - t_break) / _SCALE_NS
+            x, y, z = x + jx * jump, y + jy * jump, z + jz * jump
+        return x, y, z
 
     def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray,
                     point: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -690,31 +708,52 @@ class TrajectoryFuser(GatedEstimator):
 
     # -- impacts and outliers -------------------------------------------------------------------
 
-    def _check(self, frame: _Frame,
-               prediction: tuple[np.ndarray, np.ndarray] | None) -> str:
-        """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
-        stamp, index, rows, rhs, _ = frame
+    def _check(self, frame: _Frame, prediction: tuple[float, float, float] | None,
+               equations: tuple[tuple[float, ...], ...]) -> str:
+        """
+        Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed).
+
+        :param frame: the detection's frame
+        :param prediction: the position predicted at its stamp (:meth:`_predict_point`)
+        :param equations: the frame's rows and right-hand sides as floats (2 x 3, 2)
+        """
+        stamp, index = frame[0], frame[1]
         if prediction is None or self._break_range is not None or \
                 self._sigma_count < _SIGMA_MATURE or self._end - self._start < _GATE_SUPPORT:
             # No path yet, an impact being placed, the noise not known yet, or a path from
             # too few frames to judge a detection by (a flight's first frames).
             return 'ok'
-        point, covariance = prediction
-        found = self._innovation(index, rows, rhs, point)
+        x, y, z = prediction
+        (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+        depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
+        found = None  # the innovation [px] (two floats)
         statistic = math.inf
-        if found is not None:
-            innovation, jacobian = found
+        if depth > 0.0:
+            # The innovation and its Jacobian (rows * scale) [px/m].
+            scale = self._focal_list[index] / depth
+            (g0, g1, g2), (h0, h1, h2), (q0, q1) = equations
+            found = ((g0 * x + g1 * y + g2 * z - q0) * scale,
+                     (h0 * x + h1 * y + h2 * z - q1) * scale)
+            (k00, k01, k02), (k10, k11, k12), (k20, k21, k22) = self._predict_covariance(stamp)
+            quadratic = (g0 * (k00 * g0 + k01 * g1 + k02 * g2)
+                         + g1 * (k10 * g0 + k11 * g1 + k12 * g2)
+                         + g2 * (k20 * g0 + k21 * g1 + k22 * g2)
+                         + h0 * (k00 * h0 + k01 * h1 + k02 * h2)
+                         + h1 * (k10 * h0 + k11 * h1 + k12 * h2)
+                         + h2 * (k20 * h0 + k21 * h1 + k22 * h2))
             assert self.sigma_px is not None, 'a mature noise estimate has a value'
             sigma2 = self.sigma_px ** 2
-            spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
+            spread = sigma2 * (1.0 + scale * scale * quadratic / 2.0)
+            innovation_x, innovation_y = found
             last = self._residual.get(index)
             if last is not None and last[1] == self._segment and \
                     stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
                 # Against this camera's last residual: slowly varying biases (calibration)
                 # cancel.
-                innovation = innovation - last[2]
+                innovation_x -= last[2][0]
+                innovation_y -= last[2][1]
                 spread += sigma2
-            squared = float(innovation @ innovation) / 2.0
+            squared = (innovation_x * innovation_x + innovation_y * innovation_y) / 2.0
             if self._spread is not None:
                 spread = max(spread, self._spread)
             statistic = 2.0 * squared / spread
@@ -731,8 +770,8 @@ class TrajectoryFuser(GatedEstimator):
         rejected = self._rejected.get(index)
         if found is not None and rejected is not None and \
                 rejected[0] == self._previous.get(index) and rejected[1] is not None and \
-                float(np.linalg.norm(found[0] - rejected[1])) < \
-                0.5 * float(np.linalg.norm(found[0])):
+                math.hypot(found[0] - rejected[1][0], found[1] - rejected[1][1]) < \
+                0.5 * math.hypot(*found):
             # This camera's previous detection was rejected, off the path the same way: not
             # stray detections (they scatter) but a path the other cameras' rays have pulled
             # off this camera's (one camera alone does not fix the depth). Fitted, it
@@ -752,8 +791,16 @@ class TrajectoryFuser(GatedEstimator):
             self.stats['restarts'] += 1
             return 'inserted'
         self._pending = frame
-        self._pending_innovation = None if found is None else found[0]
+        self._pending_innovation = found
         return 'pending'
+
+    def _predict_covariance(self, stamp: int) -> list[list[float]]:
+        """Return the covariance per px^2 of the position predicted at ``stamp`` (3 x 3)."""
+        assert self._path is not None, 'predictions are made only once a path was fitted'
+        t_ref, _, covariance, t_break, _ = self._path
+        row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        row = row[:, :len(covariance)]
+        return (row @ covariance @ row.T).tolist()
 
     def _restart(self) -> None:
         """Drop the window and the path; keep the flight's timing and the measured noise."""
@@ -904,7 +951,13 @@ class TrajectoryFuser(GatedEstimator):
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
         gaps = self.gate.max_gaps
-        if sum(1 for name, last in self._last.items() if stamp - last <= gaps[name]) < 2:
+        partners = 0
+        for name, last in self._last.items():
+            if stamp - last <= gaps[name]:
+                partners += 1
+                if partners == 2:
+                    break
+        else:
             stats['no_partner'] += 1
             return None
         if self._break_range is not None and \
@@ -983,8 +1036,11 @@ class TrajectoryFuser(GatedEstimator):
             lower = self._lower_order(beta, inverse, position, sigma2)
             if lower is not None:
                 point, beta, inverse = lower
-                covariance = (position @ inverse @ position.T).tolist()
-        self._path = (stamp, beta, inverse, t_break)
+                selector = position[:, :len(beta)]
+                covariance = (selector @ inverse @ selector.T).tolist()
+        coefficients = beta.tolist()
+        self._path = (stamp, beta, inverse, t_break,
+                      coefficients + [0.0] * (12 - len(coefficients)))
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
         if self._stamp[end - 1] == stamp:
@@ -1019,11 +1075,11 @@ class TrajectoryFuser(GatedEstimator):
         smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
         jump at an impact stays free.
 
-        :param beta: (12,) the acceleration fit's coefficients at the event
-        :param inverse: (12, 12) their covariance per px^2
+        :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
+        :param inverse: (m, m) their covariance per px^2
         :param position: (3, 12) map from the coefficients to the position at the event
         :param sigma2: the detection noise's variance [px^2]
-        :return: (point (3,), beta (12,), inverse (12, 12)) of the lower-order fit, or None
+        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit, or None
         """
         gain = inverse[:, _ACCELERATION]  # (12, 3)
         block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
@@ -1039,7 +1095,7 @@ class TrajectoryFuser(GatedEstimator):
         lower_beta = beta - gain @ solved[:, best]
         lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
         lower_inverse = inverse - gain @ solved[:, 2:]
-        return (position @ lower_beta).tolist(), lower_beta, lower_inverse
+        return (position[:, :len(beta)] @ lower_beta).tolist(), lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1057,7 +1113,7 @@ class TrajectoryFuser(GatedEstimator):
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
         positions = self._position_map(stamps - stamp, None if t_break is None
-                                       else stamps - t_break) @ beta
+                                       else stamps - t_break)[:, :, :len(beta)] @ beta
         cameras = self._camera[start:end]
         depth = np.einsum('ni,ni->n', positions - self._center[cameras],
                           self._rotation[cameras, 2])
@@ -1088,13 +1144,13 @@ class TrajectoryFuser(GatedEstimator):
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]
             selector = position[:, :count]
-            # At the event the position is the coefficients of tau^0, unless the velocity
-            # jump of an impact before it enters (the 12-coefficient fits).
-            picks = _PICKS if count == 9 or not position[0, 9] else None
+            # At the event the position is the coefficients of tau^0 (every third), unless
+            # the velocity jump of an impact before it enters (the 12-coefficient fits).
+            picks = 3 if count == 9 or not position[0, 9] else None
         else:
             count = len(columns)
             selector = position[:, columns]
-            picks = _CV_PICKS
+            picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
         first = int(sizes.searchsorted(count // 2, side='right'))
         if first == len(sizes):
@@ -1113,8 +1169,8 @@ class TrajectoryFuser(GatedEstimator):
             points = (betas @ selector.T).tolist()
             covariances = (selector @ inverses @ selector.T).tolist()
         else:
-            points = betas[:, picks].tolist()
-            covariances = inverses[:, picks[:, None], picks].tolist()
+            points = betas[:, :count:picks].tolist()
+            covariances = inverses[:, :count:picks, :count:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
@@ -1156,17 +1212,12 @@ class TrajectoryFuser(GatedEstimator):
         """
         Return a solution as coefficients and their covariance per px^2.
 
-        The first ``columns`` coefficients (9 or 12) or a subset (constant velocity), in
-        place among 12 (zeros elsewhere).
+        The first ``columns`` coefficients (9 or 12: as they are; the jump's are zero
+        without an impact) or a subset (constant velocity), in place among 12 (zeros
+        elsewhere).
         """
         if isinstance(columns, int):
-            if columns == 12:
-                return beta, inverse
-            full_beta = np.zeros(12)
-            full_inverse = np.zeros((12, 12))
-            full_beta[:columns] = beta
-            full_inverse[:columns, :columns] = inverse
-            return full_beta, full_inverse
+            return beta, inverse
         full_beta = np.zeros(12)
         full_inverse = np.zeros((12, 12))
         full_beta[columns] = beta
