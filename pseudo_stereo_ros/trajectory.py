@@ -181,6 +181,9 @@ _SCALE_NS = 100_000_000
 # Window sizes [frames], nested, newest first; the largest bounds the work per event.
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 _LONGEST = int(_WINDOWS[-1])
+# Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
+# rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
+_AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
 # Frames kept (room for late observations).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
@@ -405,14 +408,15 @@ class TrajectoryFuser(GatedEstimator):
         self._rows = np.zeros((_CAPACITY, 2, 3))
         self._rhs = np.zeros((_CAPACITY, 2))
         self._weight = np.ones(_CAPACITY)
-        # Prefix sums of each frame's normal matrix and moment in the coefficients of a fixed
-        # reference stamp (_reference): a window's system is a difference of two prefixes,
-        # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
-        self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
-        self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
-        # The change of time origin (tau -> tau - delta) in the coefficients, per number of
-        # coefficients (9 without an impact, 12 with one); _fit sets its delta entries.
-        self._shift = {9: np.eye(9), 12: np.eye(12)}
+        # Prefix sums of each frame's augmented normal matrix (the normal matrix and the
+        # moment together: the design's rows extended by the right-hand side, see _AUGMENTED)
+        # in the coefficients of a fixed reference stamp (_reference): a window's system is a
+        # difference of two prefixes, moved to the event's time by a linear map (see _fit).
+        # [i] sums frames [_start, i).
+        self._prefix = np.zeros((_CAPACITY + 1, 13, 13))
+        # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
+        # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
+        self._shift = {9: np.eye(10), 12: np.eye(13)}
         # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
         self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
                                for rotation in self._rotation]
@@ -611,7 +615,7 @@ class TrajectoryFuser(GatedEstimator):
         end = self._end
         reference = self._reference
         assert reference is not None, 'the window holds frames, so _insert set the reference'
-        gram, moment = self._prefix_gram, self._prefix_moment
+        prefix = self._prefix
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
             tau = (stamp - reference) / _SCALE_NS
@@ -621,27 +625,27 @@ class TrajectoryFuser(GatedEstimator):
             if self._break is not None and stamp > self._break:
                 jump = (stamp - self._break) / _SCALE_NS
             # rows (2, 3) times the (3, 12) position map: per axis the powers of tau, then
-            # the jump's columns.
+            # the right-hand side and the jump's columns (the order of _AUGMENTED).
             design = np.array([[value * power * weight for value in row for power in powers]
+                               + [rhs * weight]
                                + ([0.0] * 3 if jump is None else
                                   [value * jump * weight for value in row])
-                               for row in self._rows[first].tolist()])
-            np.add(gram[first], design.T @ design, out=gram[end])
-            np.add(moment[first], (self._rhs[first] * weight) @ design, out=moment[end])
+                               for row, rhs in zip(self._rows[first].tolist(),
+                                                   self._rhs[first].tolist())])
+            np.add(prefix[first], design.T @ design, out=prefix[end])
             return
         if first == self._start:
-            gram[first] = 0.0
-            moment[first] = 0.0
+            prefix[first] = 0.0
         stamps = self._stamp[first:end]
         jump = None if self._break is None else stamps - self._break
         maps = self._position_map(stamps - reference, jump)
         weight = self._weight[first:end, None, None]
-        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
-        rhs = self._rhs[first:end] * weight[:, :, 0]
-        np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=gram[first + 1:end + 1])
-        gram[first + 1:end + 1] += gram[first]
-        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0, out=moment[first + 1:end + 1])
-        moment[first + 1:end + 1] += moment[first]
+        design = np.empty((end - first, 2, 13))
+        design[:, :, _AUGMENTED[:12]] = np.einsum('nra,nam->nrm', self._rows[first:end], maps)
+        design[:, :, 9] = self._rhs[first:end]
+        design *= weight
+        np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
+        prefix[first + 1:end + 1] += prefix[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -995,11 +999,14 @@ class TrajectoryFuser(GatedEstimator):
         shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
         shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
         shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
-        gram, moment = self._prefix_gram, self._prefix_moment
+        prefix = self._prefix
         previous = end - sizes
-        matrices = shift.T @ (gram[end] - gram.take(previous, axis=0))[
-            :, :unknowns, :unknowns] @ shift
-        moments = (moment[end] - moment.take(previous, axis=0))[:, :unknowns] @ shift
+        systems = prefix[end] - prefix.take(previous, axis=0)
+        # The unknowns first, the right-hand side last.
+        systems = systems[:, :10, :10] if t_break is None else \
+            systems[:, _AUGMENTED[:, None], _AUGMENTED]
+        systems = shift.T @ systems @ shift
+        matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = self._position_row(0, None if t_break is None else stamp - t_break)
         kept: _Fits | None = None
         if quadratic:
