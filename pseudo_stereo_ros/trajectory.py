@@ -180,7 +180,7 @@ DROP_REASONS = {
 _SCALE_NS = 100_000_000
 # Window sizes [frames], nested, newest first; the largest bounds the work per event.
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
-_LONGEST = int(_WINDOWS[-1])
+_SHORTEST, _LONGEST = int(_WINDOWS[0]), int(_WINDOWS[-1])
 # Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
 # rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
 _AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
@@ -263,6 +263,10 @@ class _Solutions:
 _Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
+# The map from the coefficients to the position at the reference time (no impact before it).
+_POSITION = np.zeros((3, 12))
+_POSITION[(0, 1, 2), (0, 3, 6)] = 1.0
+_POSITION.flags.writeable = False
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -738,13 +742,7 @@ class TrajectoryFuser(GatedEstimator):
             (g0, g1, g2), (h0, h1, h2), (q0, q1) = equations
             found = ((g0 * x + g1 * y + g2 * z - q0) * scale,
                      (h0 * x + h1 * y + h2 * z - q1) * scale)
-            (k00, k01, k02), (k10, k11, k12), (k20, k21, k22) = self._predict_covariance(stamp)
-            quadratic = (g0 * (k00 * g0 + k01 * g1 + k02 * g2)
-                         + g1 * (k10 * g0 + k11 * g1 + k12 * g2)
-                         + g2 * (k20 * g0 + k21 * g1 + k22 * g2)
-                         + h0 * (k00 * h0 + k01 * h1 + k02 * h2)
-                         + h1 * (k10 * h0 + k11 * h1 + k12 * h2)
-                         + h2 * (k20 * h0 + k21 * h1 + k22 * h2))
+            quadratic = self._predicted_spread(stamp, equations)
             assert self.sigma_px is not None, 'a mature noise estimate has a value'
             sigma2 = self.sigma_px ** 2
             spread = sigma2 * (1.0 + scale * scale * quadratic / 2.0)
@@ -798,13 +796,26 @@ class TrajectoryFuser(GatedEstimator):
         self._pending_innovation = found
         return 'pending'
 
-    def _predict_covariance(self, stamp: int) -> list[list[float]]:
-        """Return the covariance per px^2 of the position predicted at ``stamp`` (3 x 3)."""
+    def _predicted_spread(self, stamp: int, equations: tuple[tuple[float, ...], ...]) -> float:
+        """
+        Return the predicted position's variance along a frame's two rows, summed (per px^2).
+
+        ``sum_r g_r^T P C P^T g_r`` for the rows ``g_r`` (m^-1 scaled), the position map
+        ``P`` at ``stamp`` and the path's covariance ``C``: each row mapped to the
+        coefficients (``P^T g_r``) first.
+        """
         assert self._path is not None, 'predictions are made only once a path was fitted'
         t_ref, _, covariance, t_break, _ = self._path
-        row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
-        row = row[:, :len(covariance)]
-        return (row @ covariance @ row.T).tolist()
+        tau = (stamp - t_ref) / _SCALE_NS
+        powers = (1.0, tau, tau * tau)
+        jump = None
+        if len(covariance) == 12 and t_break is not None and stamp > t_break:
+            jump = (stamp - t_break) / _SCALE_NS
+        rows = np.array([[value * power for value in row for power in powers]
+                         + ([] if len(covariance) == 9 else [0.0] * 3 if jump is None else
+                            [value * jump for value in row])
+                         for row in equations[:2]])
+        return float((rows @ covariance * rows).sum())
 
     def _restart(self) -> None:
         """Drop the window and the path; keep the flight's timing and the measured noise."""
@@ -990,7 +1001,7 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= _WINDOWS[0]
+        quadratic = self.order == 2 and count >= _SHORTEST
         sizes = _sizes(count) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
@@ -1007,7 +1018,7 @@ class TrajectoryFuser(GatedEstimator):
             systems[:, _AUGMENTED[:, None], _AUGMENTED]
         systems = shift.T @ systems @ shift
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
-        position = self._position_row(0, None if t_break is None else stamp - t_break)
+        position = _POSITION if t_break is None else self._position_row(0, stamp - t_break)
         kept: _Fits | None = None
         if quadratic:
             if t_break is None:
@@ -1169,7 +1180,7 @@ class TrajectoryFuser(GatedEstimator):
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
-        unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
+        unit = np.einsum('kij,kji->ki', matrices, inverses)
         errors = np.abs(unit - 1.0).max(axis=1).tolist()
         betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
         if picks is None:
