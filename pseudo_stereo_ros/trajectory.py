@@ -815,7 +815,7 @@ class TrajectoryFuser(GatedEstimator):
                          + ([] if len(covariance) == 9 else [0.0] * 3 if jump is None else
                             [value * jump for value in row])
                          for row in equations[:2]])
-        return float((rows @ covariance * rows).sum())
+        return float(np.vdot(rows @ covariance, rows))
 
     def _restart(self) -> None:
         """Drop the window and the path; keep the flight's timing and the measured noise."""
@@ -1170,7 +1170,7 @@ class TrajectoryFuser(GatedEstimator):
             selector = position[:, columns]
             picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
-        first = int(sizes.searchsorted(count // 2, side='right'))
+        first = 0 if sizes[0] > count // 2 else int(sizes.searchsorted(count // 2, side='right'))
         if first == len(sizes):
             return None
         if first:
@@ -1180,8 +1180,9 @@ class TrajectoryFuser(GatedEstimator):
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
-        unit = np.einsum('kij,kji->ki', matrices, inverses)
-        errors = np.abs(unit - 1.0).max(axis=1).tolist()
+        # (Ufuncs' own reductions: the array methods add a Python layer per call.)
+        unit = np.add.reduce(matrices * inverses.transpose(0, 2, 1), axis=2)
+        errors = np.maximum.reduce(np.abs(unit - 1.0), axis=1).tolist()
         betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
         if picks is None:
             points = (betas @ selector.T).tolist()
