@@ -1170,7 +1170,8 @@ class TrajectoryFuser(GatedEstimator):
             selector = position[:, columns]
             picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
-        first = 0 if sizes[0] > count // 2 else int(sizes.searchsorted(count // 2, side='right'))
+        first = 0 if len(sizes) and sizes[0] > count // 2 else \
+            int(sizes.searchsorted(count // 2, side='right'))
         if first == len(sizes):
             return None
         if first:
