@@ -1189,8 +1189,9 @@ class TrajectoryFuser(GatedEstimator):
             points = (betas @ selector.T).tolist()
             covariances = (selector @ inverses @ selector.T).tolist()
         else:
-            points = betas[:, :count:picks].tolist()
-            covariances = inverses[:, :count:picks, :count:picks].tolist()
+            # x0, y0, z0: the first three of every ``picks`` coefficients.
+            points = betas[:, :3 * picks:picks].tolist()
+            covariances = inverses[:, :3 * picks:picks, :3 * picks:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
