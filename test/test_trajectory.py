@@ -317,7 +317,6 @@ def test_a_straight_line_keeps_the_lower_order_fit():
     assert np.mean(ratios) < 0.48, ratios
 
 
-
 @pytest.mark.parametrize('jump_offset_ns', [-5_000_000, 0, 5_000_000])
 def test_window_fits_give_the_position_at_the_event_with_or_without_the_jump(jump_offset_ns):
     # Windows across an impact fit 12 coefficients; at an event before the impact (a late
