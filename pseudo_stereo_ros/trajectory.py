@@ -742,10 +742,9 @@ class TrajectoryFuser(GatedEstimator):
             (g0, g1, g2), (h0, h1, h2), (q0, q1) = equations
             found = ((g0 * x + g1 * y + g2 * z - q0) * scale,
                      (h0 * x + h1 * y + h2 * z - q1) * scale)
-            quadratic = self._predicted_spread(stamp, equations)
             assert self.sigma_px is not None, 'a mature noise estimate has a value'
             sigma2 = self.sigma_px ** 2
-            spread = sigma2 * (1.0 + scale * scale * quadratic / 2.0)
+            noise = sigma2  # the detection's variance per axis [px^2]
             innovation_x, innovation_y = found
             last = self._residual.get(index)
             if last is not None and last[1] == self._segment and \
@@ -754,11 +753,19 @@ class TrajectoryFuser(GatedEstimator):
                 # cancel.
                 innovation_x -= last[2][0]
                 innovation_y -= last[2][1]
-                spread += sigma2
+                noise += sigma2
             squared = (innovation_x * innovation_x + innovation_y * innovation_y) / 2.0
-            if self._spread is not None:
-                spread = max(spread, self._spread)
+            # The expected spread: the noise, the prediction's own variance (in the image) and
+            # at least the running spread of accepted innovations.  The prediction's variance
+            # only raises it: it is needed only where the detection fails the gate without it.
+            spread = noise if self._spread is None else max(noise, self._spread)
             statistic = 2.0 * squared / spread
+            if not statistic <= self.innovation_gate:
+                spread = noise + sigma2 * scale * scale * \
+                    self._predicted_spread(stamp, equations) / 2.0
+                if self._spread is not None:
+                    spread = max(spread, self._spread)
+                statistic = 2.0 * squared / spread
             if statistic <= self.innovation_gate:
                 self._spread = squared if self._spread is None else self._spread + \
                     _SPREAD_ALPHA * (squared - self._spread)
