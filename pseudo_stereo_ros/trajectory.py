@@ -624,16 +624,17 @@ class TrajectoryFuser(GatedEstimator):
             stamp = int(self._stamp[first])
             tau = (stamp - reference) / _SCALE_NS
             powers = (1.0, tau, tau * tau)
-            weight = float(self._weight[first])
-            jump = None
+            frame_weight = float(self._weight[first])
+            jump_tau = None
             if self._break is not None and stamp > self._break:
-                jump = (stamp - self._break) / _SCALE_NS
+                jump_tau = (stamp - self._break) / _SCALE_NS
             # rows (2, 3) times the (3, 12) position map: per axis the powers of tau, then
             # the right-hand side and the jump's columns (the order of _AUGMENTED).
-            design = np.array([[value * power * weight for value in row for power in powers]
-                               + [rhs * weight]
-                               + ([0.0] * 3 if jump is None else
-                                  [value * jump * weight for value in row])
+            design = np.array([[value * power * frame_weight for value in row
+                                for power in powers]
+                               + [rhs * frame_weight]
+                               + ([0.0] * 3 if jump_tau is None else
+                                  [value * jump_tau * frame_weight for value in row])
                                for row, rhs in zip(self._rows[first].tolist(),
                                                    self._rhs[first].tolist())])
             np.add(prefix[first], design.T @ design, out=prefix[end])
@@ -1050,12 +1051,13 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, points, covariances, solutions = kept
+        kept_sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
         chosen = self._lepski(points, covariances, sigma2)
         beta, inverse = self._full(*solutions[chosen])
         point, covariance = points[chosen], covariances[chosen]
-        if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
+        if quadratic and chosen == len(kept_sizes) - 1 and \
+                kept_sizes[chosen] >= _CV_SELECT_MIN:
             # The model's order: the chosen window's constant velocity or free fall where
             # its acceleration does not differ significantly from theirs.
             lower = self._lower_order(beta, inverse, position, sigma2)
@@ -1081,8 +1083,8 @@ class TrajectoryFuser(GatedEstimator):
             (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
             self._depth[index] = (point[0] - c0) * d0 + (point[1] - c1) * d1 + \
                 (point[2] - c2) * d2
-            reference = bisect.bisect_left(sizes, _NOISE_WINDOW)
-            if reference < len(sizes):
+            reference = bisect.bisect_left(kept_sizes, _NOISE_WINDOW)
+            if reference < len(kept_sizes):
                 self._measure_noise(stamp, index, _standardized(
                     rows, rhs, weight, points[reference], covariances[reference]))
         return point
@@ -1212,13 +1214,13 @@ class TrajectoryFuser(GatedEstimator):
                 good.append(k)
         if not good:
             return None
-        sizes = sizes.tolist()
-        if len(good) < len(sizes):
-            sizes = [sizes[k] for k in good]
+        kept = sizes.tolist()
+        if len(good) < len(kept):
+            kept = [kept[k] for k in good]
             points = [points[k] for k in good]
             covariances = [covariances[k] for k in good]
             betas, inverses = betas[good], inverses[good]
-        return sizes, points, covariances, _Solutions(columns, betas, inverses)
+        return kept, points, covariances, _Solutions(columns, betas, inverses)
 
     @staticmethod
     def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
