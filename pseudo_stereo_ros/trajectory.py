@@ -1024,7 +1024,8 @@ class TrajectoryFuser(GatedEstimator):
         # The unknowns first, the right-hand side last.
         systems = systems[:, :10, :10] if t_break is None else \
             systems[:, _AUGMENTED[:, None], _AUGMENTED]
-        systems = shift.T @ systems @ shift
+        # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
+        systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = _POSITION if t_break is None else self._position_row(0, stamp - t_break)
         kept: _Fits | None = None
