@@ -128,6 +128,7 @@ later judged stray; their event already counted as an estimate or a drop).
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 import math
@@ -179,6 +180,10 @@ DROP_REASONS = {
 _SCALE_NS = 100_000_000
 # Window sizes [frames], nested, newest first; the largest bounds the work per event.
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
+_SHORTEST, _LONGEST = int(_WINDOWS[0]), int(_WINDOWS[-1])
+# Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
+# rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
+_AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
 # Frames kept (room for late observations).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
@@ -232,10 +237,11 @@ _IMPACT_REACH = 5.0
 
 # A detection to fit: (stamp [ns], camera index, rows (2, 3), right-hand sides (2,), weight).
 _Frame: TypeAlias = tuple[int, int, np.ndarray, np.ndarray, float]
-# A path: (reference stamp [ns], beta (12,), covariance (12, 12) per px^2, impact stamp or None).
-_Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None]
-# A camera's residual: (stamp [ns], segment, standardized residual (2,) [px]).
-_Residual: TypeAlias = tuple[int, int, np.ndarray]
+# A path: (reference stamp [ns], beta (m,), covariance (m, m) per px^2 (m = 9 without the
+# jump's coefficients, or 12), impact stamp or None, beta as 12 floats).
+_Path: TypeAlias = tuple[int, np.ndarray, np.ndarray, int | None, list[float]]
+# A camera's residual: (stamp [ns], segment, standardized residual (two floats) [px]).
+_Residual: TypeAlias = tuple[int, int, tuple[float, float]]
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
 _Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
 
@@ -253,14 +259,14 @@ class _Solutions:
         return self.columns, self.betas[k], self.inverses[k]
 
 
-# Solved windows: (sizes (K,), points (K, 3), covariances (K, 3, 3), depths (K,), solutions).
-_Fits: TypeAlias = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                         _Solutions | list[_Solution]]
+# Solved windows: (sizes, points (3 floats each), covariances (3 x 3 nested lists), solutions).
+_Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
 _SIZES: dict[int, np.ndarray] = {}
-_COLUMNS = {9: np.arange(9), 12: np.arange(12)}
-_EYE3 = np.eye(3)
-_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+# The map from the coefficients to the position at the reference time (no impact before it).
+_POSITION = np.zeros((3, 12))
+_POSITION[(0, 1, 2), (0, 3, 6)] = 1.0
+_POSITION.flags.writeable = False
 
 
 def _sizes(count: int) -> np.ndarray:
@@ -271,12 +277,48 @@ def _sizes(count: int) -> np.ndarray:
     return sizes
 
 
-def _pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return the index pairs (j, k), j < k, of ``count`` windows: (shorter, longer)."""
-    pairs = _PAIRS.get(count)
-    if pairs is None:
-        pairs = _PAIRS[count] = np.triu_indices(count, 1)
-    return pairs
+def _inverse_form(x: float, y: float, z: float, a: float, b: float, c: float, e: float,
+                  f: float, i: float) -> float:
+    """
+    Return ``d^T S^-1 d`` for ``d = (x, y, z)`` and a symmetric ``S`` (zero if singular).
+
+    ``S`` has the rows (a b c), (b e f), (c f i).
+    """
+    # The adjugate's entries (S^-1 = adjugate / determinant).
+    adj_a, adj_b, adj_c = e * i - f * f, c * f - b * i, b * f - c * e
+    adj_e, adj_f, adj_i = a * i - c * c, b * c - a * f, a * e - b * b
+    determinant = a * adj_a + b * adj_b + c * adj_c
+    if determinant == 0.0:
+        return 0.0
+    return (x * x * adj_a + y * y * adj_e + z * z * adj_i
+            + 2.0 * (x * y * adj_b + x * z * adj_c + y * z * adj_f)) / determinant
+
+
+def _standardized(rows: list, rhs: list, weight: float, point: list,
+                  covariance: list) -> tuple[float, float]:
+    """
+    Return a frame's residual (two floats) [px] over sqrt(1 - leverage) in a fit.
+
+    The frame's design rows are ``weight * rows @ position`` (position: the map from the
+    fit's coefficients to the position at the frame's stamp), so its residual and leverage
+    need only the fitted position there and its covariance.
+
+    :param rows: the frame's rows (2 x 3), ``rhs`` their right-hand sides (2)
+    :param weight: the frame's weight [px/m]
+    :param point: the fitted position (3) [m] at the frame's stamp
+    :param covariance: its covariance per px^2 (3 x 3)
+    """
+    x, y, z = point
+    (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = covariance
+    (a0, a1, a2), (b0, b1, b2) = rows
+    quadratic = (a0 * (c00 * a0 + c01 * a1 + c02 * a2) + a1 * (c10 * a0 + c11 * a1 + c12 * a2)
+                 + a2 * (c20 * a0 + c21 * a1 + c22 * a2)
+                 + b0 * (c00 * b0 + c01 * b1 + c02 * b2) + b1 * (c10 * b0 + c11 * b1 + c12 * b2)
+                 + b2 * (c20 * b0 + c21 * b1 + c22 * b2))
+    leverage = min(0.95, weight * weight * quadratic / 2.0)
+    scale = math.sqrt(1.0 - leverage)
+    return (weight * (a0 * x + a1 * y + a2 * z - rhs[0]) / scale,
+            weight * (b0 * x + b1 * y + b2 * z - rhs[1]) / scale)
 
 
 class TrajectoryFuser(GatedEstimator):
@@ -357,8 +399,10 @@ class TrajectoryFuser(GatedEstimator):
         # R @ centre per camera (plain floats): a detection's right-hand sides without numpy.
         self._rotated_center = [tuple(float(v) for v in rotation @ center)
                                 for rotation, center in zip(self._rotation, self._center)]
+        self._center_rows = [tuple(float(v) for v in center) for center in self._center]
         self._focal = np.array([math.sqrt(abs(camera.K[0, 0] * camera.K[1, 1]))
                                 for camera in cameras])
+        self._focal_list = self._focal.tolist()
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
         self._depth = np.full(len(cameras), max(baseline, 1e-3))
@@ -368,14 +412,15 @@ class TrajectoryFuser(GatedEstimator):
         self._rows = np.zeros((_CAPACITY, 2, 3))
         self._rhs = np.zeros((_CAPACITY, 2))
         self._weight = np.ones(_CAPACITY)
-        # Prefix sums of each frame's normal matrix and moment in the coefficients of a fixed
-        # reference stamp (_reference): a window's system is a difference of two prefixes,
-        # moved to the event's time by a linear map (see _fit).  [i] sums frames [_start, i).
-        self._prefix_gram = np.zeros((_CAPACITY + 1, 12, 12))
-        self._prefix_moment = np.zeros((_CAPACITY + 1, 12))
-        # The change of time origin (tau -> tau - delta) in the coefficients, per number of
-        # coefficients (9 without an impact, 12 with one); _fit sets its delta entries.
-        self._shift = {9: np.eye(9), 12: np.eye(12)}
+        # Prefix sums of each frame's augmented normal matrix (the normal matrix and the
+        # moment together: the design's rows extended by the right-hand side, see _AUGMENTED)
+        # in the coefficients of a fixed reference stamp (_reference): a window's system is a
+        # difference of two prefixes, moved to the event's time by a linear map (see _fit).
+        # [i] sums frames [_start, i).
+        self._prefix = np.zeros((_CAPACITY + 1, 13, 13))
+        # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
+        # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
+        self._shift = {9: np.eye(10), 12: np.eye(13)}
         # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
         self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
                                for rotation in self._rotation]
@@ -405,8 +450,9 @@ class TrajectoryFuser(GatedEstimator):
         self._last: dict[str, int] = {}  # camera name -> its newest stamp
         self._path: _Path | None = None  # the path of the newest estimate
         self._pending: _Frame | None = None  # a detection not fitted yet
-        # Its innovation (2,) [px] against the path (None when its depth was not positive).
-        self._pending_innovation: np.ndarray | None = None
+        # Its innovation (two floats) [px] against the path (None when its depth was not
+        # positive).
+        self._pending_innovation: tuple[float, float] | None = None
         self._break: int | None = None  # stamp of the impact inside the window [ns], or None
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
@@ -416,7 +462,7 @@ class TrajectoryFuser(GatedEstimator):
         # Camera index -> its newest residual in the fit.
         self._residual: dict[int, _Residual] = {}
         # Camera index -> (stamp, innovation or None) of its last detection taken as an outlier.
-        self._rejected: dict[int, tuple[int, np.ndarray | None]] = {}
+        self._rejected: dict[int, tuple[int, tuple[float, float] | None]] = {}
         # Camera index -> stamp of its detection before the newest (None: it had none).
         self._previous: dict[int, int | None] = {}
         # Camera index -> the same as _residual from the noise estimate's fixed-length fit.
@@ -475,24 +521,24 @@ class TrajectoryFuser(GatedEstimator):
         the returning camera's detections stray.
         """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
-        rows = np.array(((a0 - x * c0, a1 - x * c1, a2 - x * c2),
-                         (b0 - y * c0, b1 - y * c1, b2 - y * c2)))
         r0, r1, r2 = self._rotated_center[index]
+        equations = ((a0 - x * c0, a1 - x * c1, a2 - x * c2),
+                     (b0 - y * c0, b1 - y * c1, b2 - y * c2), (r0 - x * r2, r1 - y * r2))
         depth = self._depth[index]
         prediction = None
         if self._path is not None:
-            prediction = self._predict(stamp)
-            predicted = float(self._rotation[index, 2] @ prediction[0]) - r2
+            prediction = self._predict_point(stamp)
+            predicted = c0 * prediction[0] + c1 * prediction[1] + c2 * prediction[2] - r2
             if predicted > 0.0:
                 depth = predicted
-        frame: _Frame = (stamp, index, rows, np.array((r0 - x * r2, r1 - y * r2)),
+        frame: _Frame = (stamp, index, np.array(equations[:2]), np.array(equations[2]),
                          self._focal[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
             self._pending = None  # the path is corrected by this detection, not judged
         else:
-            verdict = self._check(frame, prediction)
+            verdict = self._check(frame, prediction, equations)
             if verdict == 'pending':
                 return self._pending_estimate(frame)
             if verdict == 'inserted':
@@ -553,13 +599,15 @@ class TrajectoryFuser(GatedEstimator):
         self._rows[position] = rows
         self._rhs[position] = rhs
         self._weight[position] = weight
-        self._end = end + 1
-        start = max(self._start, self._end - int(_WINDOWS[-1]))
-        start += int(np.searchsorted(self._stamp[start:self._end],
-                                     self._stamp[self._end - 1] - self.max_window_ns))
-        self._start = min(start, self._end - 1)
-        if self._reference is None or \
-                self._stamp[self._end - 1] - self._reference > self.max_window_ns + _REANCHOR_NS:
+        self._end = end = end + 1
+        start = max(self._start, end - _LONGEST)
+        newest = int(self._stamp[end - 1])
+        oldest = newest - self.max_window_ns
+        stamps = self._stamp
+        while start < end and stamps[start] < oldest:  # usually one step at most
+            start += 1
+        self._start = min(start, end - 1)
+        if self._reference is None or newest - self._reference > self.max_window_ns + _REANCHOR_NS:
             self._reference = int(self._stamp[self._start])
             rebuild = self._start
         if rebuild is None:
@@ -571,35 +619,38 @@ class TrajectoryFuser(GatedEstimator):
         end = self._end
         reference = self._reference
         assert reference is not None, 'the window holds frames, so _insert set the reference'
-        gram, moment = self._prefix_gram, self._prefix_moment
+        prefix = self._prefix
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
             tau = (stamp - reference) / _SCALE_NS
-            weight = self._weight[first]
-            rows = self._rows[first]
-            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau.
-            design = np.zeros((2, 12))
-            design[:, :9] = (rows[:, :, None] * (1.0, tau, tau * tau)).reshape(2, 9)
+            powers = (1.0, tau, tau * tau)
+            frame_weight = float(self._weight[first])
+            jump_tau = None
             if self._break is not None and stamp > self._break:
-                design[:, 9:] = rows * ((stamp - self._break) / _SCALE_NS)
-            design *= weight
-            gram[end] = gram[first] + design.T @ design
-            moment[end] = moment[first] + (self._rhs[first] * weight) @ design
+                jump_tau = (stamp - self._break) / _SCALE_NS
+            # rows (2, 3) times the (3, 12) position map: per axis the powers of tau, then
+            # the right-hand side and the jump's columns (the order of _AUGMENTED).
+            design = np.array([[value * power * frame_weight for value in row
+                                for power in powers]
+                               + [rhs * frame_weight]
+                               + ([0.0] * 3 if jump_tau is None else
+                                  [value * jump_tau * frame_weight for value in row])
+                               for row, rhs in zip(self._rows[first].tolist(),
+                                                   self._rhs[first].tolist())])
+            np.add(prefix[first], design.T @ design, out=prefix[end])
             return
         if first == self._start:
-            gram[first] = 0.0
-            moment[first] = 0.0
+            prefix[first] = 0.0
         stamps = self._stamp[first:end]
         jump = None if self._break is None else stamps - self._break
         maps = self._position_map(stamps - reference, jump)
         weight = self._weight[first:end, None, None]
-        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
-        rhs = self._rhs[first:end] * weight[:, :, 0]
-        np.cumsum(np.einsum('nri,nrj->nij', design, design), axis=0,
-                  out=gram[first + 1:end + 1])
-        gram[first + 1:end + 1] += gram[first]
-        np.cumsum(np.einsum('nri,nr->ni', design, rhs), axis=0, out=moment[first + 1:end + 1])
-        moment[first + 1:end + 1] += moment[first]
+        design = np.empty((end - first, 2, 13))
+        design[:, :, _AUGMENTED[:12]] = np.einsum('nra,nam->nrm', self._rows[first:end], maps)
+        design[:, :, 9] = self._rhs[first:end]
+        design *= weight
+        np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
+        prefix[first + 1:end + 1] += prefix[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -637,9 +688,23 @@ class TrajectoryFuser(GatedEstimator):
     def _predict(self, stamp: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
         assert self._path is not None, 'predictions are made only once a path was fitted'
-        t_ref, beta, covariance, t_break = self._path
+        t_ref, beta, covariance, t_break, _ = self._path
         row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        row = row[:, :len(beta)]
         return row @ beta, row @ covariance @ row.T
+
+    def _predict_point(self, stamp: int) -> tuple[float, float, float]:
+        """Return the predicted position [m] as floats (the fast path of :meth:`_predict`)."""
+        assert self._path is not None, 'predictions are made only once a path was fitted'
+        t_ref, _, _, t_break, coefficients = self._path
+        tau = (stamp - t_ref) / _SCALE_NS
+        tau2 = tau * tau
+        x0, x1, x2, y0, y1, y2, z0, z1, z2, jx, jy, jz = coefficients
+        x, y, z = x0 + x1 * tau + x2 * tau2, y0 + y1 * tau + y2 * tau2, z0 + z1 * tau + z2 * tau2
+        if t_break is not None and stamp > t_break:
+            jump = (stamp - t_break) / _SCALE_NS
+            x, y, z = x + jx * jump, y + jy * jump, z + jz * jump
+        return x, y, z
 
     def _innovation(self, index: int, rows: np.ndarray, rhs: np.ndarray,
                     point: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -652,34 +717,56 @@ class TrajectoryFuser(GatedEstimator):
 
     # -- impacts and outliers -------------------------------------------------------------------
 
-    def _check(self, frame: _Frame,
-               prediction: tuple[np.ndarray, np.ndarray] | None) -> str:
-        """Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed)."""
-        stamp, index, rows, rhs, _ = frame
+    def _check(self, frame: _Frame, prediction: tuple[float, float, float] | None,
+               equations: tuple[tuple[float, ...], ...]) -> str:
+        """
+        Classify a new detection: 'ok', 'pending', or 'inserted' (an impact confirmed).
+
+        :param frame: the detection's frame
+        :param prediction: the position predicted at its stamp (:meth:`_predict_point`)
+        :param equations: the frame's rows and right-hand sides as floats (2 x 3, 2)
+        """
+        stamp, index = frame[0], frame[1]
         if prediction is None or self._break_range is not None or \
                 self._sigma_count < _SIGMA_MATURE or self._end - self._start < _GATE_SUPPORT:
             # No path yet, an impact being placed, the noise not known yet, or a path from
             # too few frames to judge a detection by (a flight's first frames).
             return 'ok'
-        point, covariance = prediction
-        found = self._innovation(index, rows, rhs, point)
+        x, y, z = prediction
+        (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+        depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
+        found = None  # the innovation [px] (two floats)
         statistic = math.inf
-        if found is not None:
-            innovation, jacobian = found
+        if depth > 0.0:
+            # The innovation and its Jacobian (rows * scale) [px/m].
+            scale = self._focal_list[index] / depth
+            (g0, g1, g2), (h0, h1, h2), (q0, q1) = equations
+            found = ((g0 * x + g1 * y + g2 * z - q0) * scale,
+                     (h0 * x + h1 * y + h2 * z - q1) * scale)
             assert self.sigma_px is not None, 'a mature noise estimate has a value'
             sigma2 = self.sigma_px ** 2
-            spread = sigma2 * (1.0 + float((jacobian @ covariance * jacobian).sum()) / 2.0)
+            noise = sigma2  # the detection's variance per axis [px^2]
+            innovation_x, innovation_y = found
             last = self._residual.get(index)
             if last is not None and last[1] == self._segment and \
                     stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
                 # Against this camera's last residual: slowly varying biases (calibration)
                 # cancel.
-                innovation = innovation - last[2]
-                spread += sigma2
-            squared = float(innovation @ innovation) / 2.0
-            if self._spread is not None:
-                spread = max(spread, self._spread)
+                innovation_x -= last[2][0]
+                innovation_y -= last[2][1]
+                noise += sigma2
+            squared = (innovation_x * innovation_x + innovation_y * innovation_y) / 2.0
+            # The expected spread: the noise, the prediction's own variance (in the image) and
+            # at least the running spread of accepted innovations.  The prediction's variance
+            # only raises it: it is needed only where the detection fails the gate without it.
+            spread = noise if self._spread is None else max(noise, self._spread)
             statistic = 2.0 * squared / spread
+            if not statistic <= self.innovation_gate:
+                spread = noise + sigma2 * scale * scale * \
+                    self._predicted_spread(stamp, equations) / 2.0
+                if self._spread is not None:
+                    spread = max(spread, self._spread)
+                statistic = 2.0 * squared / spread
             if statistic <= self.innovation_gate:
                 self._spread = squared if self._spread is None else self._spread + \
                     _SPREAD_ALPHA * (squared - self._spread)
@@ -693,8 +780,8 @@ class TrajectoryFuser(GatedEstimator):
         rejected = self._rejected.get(index)
         if found is not None and rejected is not None and \
                 rejected[0] == self._previous.get(index) and rejected[1] is not None and \
-                float(np.linalg.norm(found[0] - rejected[1])) < \
-                0.5 * float(np.linalg.norm(found[0])):
+                math.hypot(found[0] - rejected[1][0], found[1] - rejected[1][1]) < \
+                0.5 * math.hypot(*found):
             # This camera's previous detection was rejected, off the path the same way: not
             # stray detections (they scatter) but a path the other cameras' rays have pulled
             # off this camera's (one camera alone does not fix the depth). Fitted, it
@@ -714,8 +801,29 @@ class TrajectoryFuser(GatedEstimator):
             self.stats['restarts'] += 1
             return 'inserted'
         self._pending = frame
-        self._pending_innovation = None if found is None else found[0]
+        self._pending_innovation = found
         return 'pending'
+
+    def _predicted_spread(self, stamp: int, equations: tuple[tuple[float, ...], ...]) -> float:
+        """
+        Return the predicted position's variance along a frame's two rows, summed (per px^2).
+
+        ``sum_r g_r^T P C P^T g_r`` for the rows ``g_r`` (m^-1 scaled), the position map
+        ``P`` at ``stamp`` and the path's covariance ``C``: each row mapped to the
+        coefficients (``P^T g_r``) first.
+        """
+        assert self._path is not None, 'predictions are made only once a path was fitted'
+        t_ref, _, covariance, t_break, _ = self._path
+        tau = (stamp - t_ref) / _SCALE_NS
+        powers = (1.0, tau, tau * tau)
+        jump = None
+        if len(covariance) == 12 and t_break is not None and stamp > t_break:
+            jump = (stamp - t_break) / _SCALE_NS
+        rows = np.array([[value * power for value in row for power in powers]
+                         + ([] if len(covariance) == 9 else [0.0] * 3 if jump is None else
+                            [value * jump for value in row])
+                         for row in equations[:2]])
+        return float(np.vdot(rows @ covariance, rows))
 
     def _restart(self) -> None:
         """Drop the window and the path; keep the flight's timing and the measured noise."""
@@ -866,7 +974,13 @@ class TrajectoryFuser(GatedEstimator):
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
         gaps = self.gate.max_gaps
-        if sum(1 for name, last in self._last.items() if stamp - last <= gaps[name]) < 2:
+        partners = 0
+        for name, last in self._last.items():
+            if stamp - last <= gaps[name]:
+                partners += 1
+                if partners == 2:
+                    break
+        else:
             stats['no_partner'] += 1
             return None
         if self._break_range is not None and \
@@ -895,7 +1009,7 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= _WINDOWS[0]
+        quadratic = self.order == 2 and count >= _SHORTEST
         sizes = _sizes(count) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
@@ -904,12 +1018,16 @@ class TrajectoryFuser(GatedEstimator):
         shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
         shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
         shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
-        gram, moment = self._prefix_gram, self._prefix_moment
+        prefix = self._prefix
         previous = end - sizes
-        matrices = shift.T @ (gram[end, :unknowns, :unknowns]
-                              - gram[previous, :unknowns, :unknowns]) @ shift
-        moments = (moment[end, :unknowns] - moment[previous, :unknowns]) @ shift
-        position = self._position_row(0, None if t_break is None else stamp - t_break)
+        systems = prefix[end] - prefix.take(previous, axis=0)
+        # The unknowns first, the right-hand side last.
+        systems = systems[:, :10, :10] if t_break is None else \
+            systems[:, _AUGMENTED[:, None], _AUGMENTED]
+        # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
+        systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
+        matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
+        position = _POSITION if t_break is None else self._position_row(0, stamp - t_break)
         kept: _Fits | None = None
         if quadratic:
             if t_break is None:
@@ -934,18 +1052,23 @@ class TrajectoryFuser(GatedEstimator):
         if kept is None:
             self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
             return None
-        sizes, points, covariances, depths, solutions = kept
+        kept_sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
-        chosen = self._lepski(points, covariances * sigma2)
+        chosen = self._lepski(points, covariances, sigma2)
         beta, inverse = self._full(*solutions[chosen])
-        point = points[chosen]
-        if quadratic and chosen == len(sizes) - 1 and sizes[chosen] >= _CV_SELECT_MIN:
+        point, covariance = points[chosen], covariances[chosen]
+        if quadratic and chosen == len(kept_sizes) - 1 and \
+                kept_sizes[chosen] >= _CV_SELECT_MIN:
             # The model's order: the chosen window's constant velocity or free fall where
             # its acceleration does not differ significantly from theirs.
             lower = self._lower_order(beta, inverse, position, sigma2)
             if lower is not None:
                 point, beta, inverse = lower
-        self._path = (stamp, beta, inverse, t_break)
+                selector = position[:, :len(beta)]
+                covariance = (selector @ inverse @ selector.T).tolist()
+        coefficients = beta.tolist()
+        self._path = (stamp, beta, inverse, t_break,
+                      coefficients + [0.0] * (12 - len(coefficients)))
         if self._weights_guessed:
             self._refresh_weights(stamp, beta, t_break)
         if self._stamp[end - 1] == stamp:
@@ -953,19 +1076,18 @@ class TrajectoryFuser(GatedEstimator):
             # estimate's fixed-length fit; the frame's row maps the coefficients to the
             # position at the event, so its residual and leverage need only that position
             # and its covariance.
-            weight = self._weight[end - 1]
-            row = self._rows[end - 1] @ position * weight
-            rhs = self._rhs[end - 1] * weight
+            weight = float(self._weight[end - 1])
+            rows = self._rows[end - 1].tolist()
+            rhs = self._rhs[end - 1].tolist()
             self._residual[index] = (stamp, self._segment,
-                                     self._standardized(row, rhs, beta, inverse))
-            self._depth[index] = float(self._rotation[index, 2] @ (point - self._center[index]))
-            reference = int(sizes.searchsorted(_NOISE_WINDOW))
-            if reference < len(sizes):
-                columns, reference_beta, reference_inverse = solutions[reference]
-                if isinstance(columns, int):
-                    columns = _COLUMNS[columns]
-                self._measure_noise(stamp, index, self._standardized(
-                    row[:, columns], rhs, reference_beta, reference_inverse))
+                                     _standardized(rows, rhs, weight, point, covariance))
+            (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+            self._depth[index] = (point[0] - c0) * d0 + (point[1] - c1) * d1 + \
+                (point[2] - c2) * d2
+            reference = bisect.bisect_left(kept_sizes, _NOISE_WINDOW)
+            if reference < len(kept_sizes):
+                self._measure_noise(stamp, index, _standardized(
+                    rows, rhs, weight, points[reference], covariances[reference]))
         return point
 
     def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
@@ -981,11 +1103,11 @@ class TrajectoryFuser(GatedEstimator):
         smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
         jump at an impact stays free.
 
-        :param beta: (12,) the acceleration fit's coefficients at the event
-        :param inverse: (12, 12) their covariance per px^2
+        :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
+        :param inverse: (m, m) their covariance per px^2
         :param position: (3, 12) map from the coefficients to the position at the event
         :param sigma2: the detection noise's variance [px^2]
-        :return: (point (3,), beta (12,), inverse (12, 12)) of the lower-order fit, or None
+        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit, or None
         """
         gain = inverse[:, _ACCELERATION]  # (12, 3)
         block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
@@ -1001,7 +1123,7 @@ class TrajectoryFuser(GatedEstimator):
         lower_beta = beta - gain @ solved[:, best]
         lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
         lower_inverse = inverse - gain @ solved[:, 2:]
-        return position @ lower_beta, lower_beta, lower_inverse
+        return (position[:, :len(beta)] @ lower_beta).tolist(), lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1019,7 +1141,7 @@ class TrajectoryFuser(GatedEstimator):
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
         positions = self._position_map(stamps - stamp, None if t_break is None
-                                       else stamps - t_break) @ beta
+                                       else stamps - t_break)[:, :, :len(beta)] @ beta
         cameras = self._camera[start:end]
         depth = np.einsum('ni,ni->n', positions - self._center[cameras],
                           self._rotation[cameras, 2])
@@ -1040,19 +1162,26 @@ class TrajectoryFuser(GatedEstimator):
             array (already applied to ``matrices`` and ``moments``)
         :param position: (3, 12) map from the coefficients to the position at the event
         :param index: the event's camera
-        :return: ``(sizes, points (K, 3), covariances (K, 3, 3) per px^2, depths (K,),
-            solutions)`` with ``solutions[k] = (columns, beta (m,), inverse (m, m))``, or None
+        :return: ``(sizes, points, covariances per px^2, solutions)``: the kept windows'
+            sizes, positions at the event (3 floats each) and their covariances (3 x 3
+            nested lists), with ``solutions[k] = (columns, beta (m,), inverse (m, m))``;
+            or None
         """
         if isinstance(columns, int):
             count = columns
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]
             selector = position[:, :count]
+            # At the event the position is the coefficients of tau^0 (every third), unless
+            # the velocity jump of an impact before it enters (the 12-coefficient fits).
+            picks = 3 if count == 9 or not position[0, 9] else None
         else:
             count = len(columns)
             selector = position[:, columns]
+            picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
-        first = int(sizes.searchsorted(count // 2, side='right'))
+        first = 0 if len(sizes) and sizes[0] > count // 2 else \
+            int(sizes.searchsorted(count // 2, side='right'))
         if first == len(sizes):
             return None
         if first:
@@ -1062,39 +1191,51 @@ class TrajectoryFuser(GatedEstimator):
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
-        unit = (matrices * inverses.transpose(0, 2, 1)).sum(axis=2)
-        betas = (inverses @ moments[:, :, None])[:, :, 0]
-        points = betas @ selector.T
-        covariances = selector @ inverses @ selector.T
-        depths = (points - self._center[index]) @ self._rotation[index, 2]
-        variance = covariances[:, 0, 0] + covariances[:, 1, 1] + covariances[:, 2, 2]
+        # (Ufuncs' own reductions: the array methods add a Python layer per call.)
+        unit = np.add.reduce(matrices * inverses.transpose(0, 2, 1), axis=2)
+        errors = np.maximum.reduce(np.abs(unit - 1.0), axis=1).tolist()
+        betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
+        if picks is None:
+            points = (betas @ selector.T).tolist()
+            covariances = (selector @ inverses @ selector.T).tolist()
+        else:
+            # x0, y0, z0: the first three of every ``picks`` coefficients.
+            points = betas[:, :3 * picks:picks].tolist()
+            covariances = inverses[:, :3 * picks:picks, :3 * picks:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
         limit = self.max_uncertainty / self._focal[index]
-        good = (np.abs(unit - 1.0).max(axis=1) < 1e-6) & (depths > 0.0) & (variance > 0.0) & \
-            (variance <= limit * limit * depths * depths)
-        if not good.all():
-            if not good.any():
-                return None
-            good = np.nonzero(good)[0]
-            sizes, points, covariances, depths = (sizes[good], points[good], covariances[good],
-                                                  depths[good])
+        limit2 = limit * limit
+        (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+        good = []
+        for k, ((x, y, z), covariance, error) in enumerate(zip(points, covariances, errors)):
+            depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
+            variance = covariance[0][0] + covariance[1][1] + covariance[2][2]
+            if error < 1e-6 and depth > 0.0 and 0.0 < variance <= limit2 * depth * depth:
+                good.append(k)
+        if not good:
+            return None
+        kept = sizes.tolist()
+        if len(good) < len(kept):
+            kept = [kept[k] for k in good]
+            points = [points[k] for k in good]
+            covariances = [covariances[k] for k in good]
             betas, inverses = betas[good], inverses[good]
-        return sizes, points, covariances, depths, _Solutions(columns, betas, inverses)
+        return kept, points, covariances, _Solutions(columns, betas, inverses)
 
     @staticmethod
     def _merge(first: _Fits | None, second: _Fits | None) -> _Fits | None:
         """Merge two results of :meth:`_fits` in order of window size."""
         if first is None or second is None:
             return second if first is None else first
-        sizes = np.concatenate((first[0], second[0]))
-        order = np.argsort(sizes, kind='stable')
-        solutions = [first[4][k] for k in range(len(first[0]))] + \
-            [second[4][k] for k in range(len(second[0]))]
-        return (sizes[order], np.concatenate((first[1], second[1]))[order],
-                np.concatenate((first[2], second[2]))[order],
-                np.concatenate((first[3], second[3]))[order],
-                [solutions[k] for k in order])
+        sizes = first[0] + second[0]
+        order = sorted(range(len(sizes)), key=sizes.__getitem__)  # stable
+        points = first[1] + second[1]
+        covariances = first[2] + second[2]
+        solutions = [first[3][k] for k in range(len(first[0]))] + \
+            [second[3][k] for k in range(len(second[0]))]
+        return ([sizes[k] for k in order], [points[k] for k in order],
+                [covariances[k] for k in order], [solutions[k] for k in order])
 
     @staticmethod
     def _full(columns: int | np.ndarray, beta: np.ndarray,
@@ -1102,62 +1243,63 @@ class TrajectoryFuser(GatedEstimator):
         """
         Return a solution as coefficients and their covariance per px^2.
 
-        The first ``columns`` coefficients (9 or 12) or a subset (constant velocity), in
-        place among 12 (zeros elsewhere).
+        The first ``columns`` coefficients (9 or 12: as they are; the jump's are zero
+        without an impact) or a subset (constant velocity), in place among 12 (zeros
+        elsewhere).
         """
         if isinstance(columns, int):
-            if columns == 12:
-                return beta, inverse
-            full_beta = np.zeros(12)
-            full_inverse = np.zeros((12, 12))
-            full_beta[:columns] = beta
-            full_inverse[:columns, :columns] = inverse
-            return full_beta, full_inverse
+            return beta, inverse
         full_beta = np.zeros(12)
         full_inverse = np.zeros((12, 12))
         full_beta[columns] = beta
         full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
 
-    @staticmethod
-    def _standardized(row: np.ndarray, rhs: np.ndarray, beta: np.ndarray,
-                      inverse: np.ndarray) -> np.ndarray:
-        """Return a frame's residual (2,) [px] over sqrt(1 - leverage)."""
-        leverage = min(0.95, float((row @ inverse * row).sum()) / 2.0)
-        return (row @ beta - rhs) / math.sqrt(1.0 - leverage)
+    def _lepski(self, points: list, covariances: list, sigma2: float) -> int:
+        """
+        Return the index of the longest window consistent with every shorter one.
 
-    def _lepski(self, points: np.ndarray, covariances: np.ndarray) -> int:
-        """Return the index of the longest window consistent with every shorter one."""
+        :param points: the windows' positions (3 floats each), shortest window first
+        :param covariances: their covariances per px^2 (3 x 3 nested lists)
+        :param sigma2: the detection noise's variance [px^2]
+        """
         count = len(points)
         if count == 1:
             return 0
-        # difference[j, k] = X_k - X_j; for nested fits of one model its covariance is
-        # C_j - C_k (X_k the more efficient); 0.9 C_k keeps the matrix positive.
-        # Only the pairs j < k are tested.
-        shorter_index, longer_index = _pairs(count)
-        difference = points[longer_index] - points[shorter_index]
+        # The difference X_k - X_j of nested fits of one model has the covariance C_j - C_k
+        # (X_k the more efficient); 0.9 C_k keeps the matrix positive.  Windows are tested
+        # from the shortest: the first longer window k inconsistent with a shorter one ends
+        # the search at k - 1.
         first = covariances[0]
-        ridge = _EYE3 * (1e-12 * float(first[0, 0] + first[1, 1] + first[2, 2]))
-        spread = covariances[shorter_index] - 0.9 * covariances[longer_index] + ridge
-        statistic = (difference * np.linalg.solve(spread, difference[..., None])[..., 0]).sum(1)
-        if (statistic <= 0.0).any():
-            # Not positive where the difference of covariances is not (windows with and
-            # without an impact are not nested models): the shorter window's covariance
-            # C_j bounds it.
-            every = points[None, :, :] - points[:, None, :]
-            shorter = np.einsum('jki,jil,jkl->jk', every, np.linalg.inv(covariances + ridge),
-                                every)[shorter_index, longer_index]
-            statistic = np.where(statistic > 0.0, statistic, shorter)
-        bad = statistic > self.consistency
-        if not bad.any():
-            return count - 1
-        return int(longer_index[bad].min()) - 1
+        ridge = 1e-12 * sigma2 * (first[0][0] + first[1][1] + first[2][2])
+        consistency = self.consistency
+        for k in range(1, count):
+            xk, yk, zk = points[k]
+            (l00, l01, l02), (_, l11, l12), (_, _, l22) = covariances[k]
+            for j in range(k):
+                xj, yj, zj = points[j]
+                (s00, s01, s02), (_, s11, s12), (_, _, s22) = covariances[j]
+                dx, dy, dz = xk - xj, yk - yj, zk - zj
+                statistic = _inverse_form(
+                    dx, dy, dz, sigma2 * (s00 - 0.9 * l00) + ridge, sigma2 * (s01 - 0.9 * l01),
+                    sigma2 * (s02 - 0.9 * l02), sigma2 * (s11 - 0.9 * l11) + ridge,
+                    sigma2 * (s12 - 0.9 * l12), sigma2 * (s22 - 0.9 * l22) + ridge)
+                if statistic <= 0.0:
+                    # Not positive where the difference of covariances is not (windows with
+                    # and without an impact are not nested models): the shorter window's
+                    # covariance C_j bounds it.
+                    statistic = _inverse_form(
+                        dx, dy, dz, sigma2 * s00 + ridge, sigma2 * s01, sigma2 * s02,
+                        sigma2 * s11 + ridge, sigma2 * s12, sigma2 * s22 + ridge)
+                if statistic > consistency:
+                    return k - 1
+        return count - 1
 
-    def _measure_noise(self, stamp: int, index: int, residual: np.ndarray) -> None:
+    def _measure_noise(self, stamp: int, index: int, residual: tuple[float, float]) -> None:
         """
         Update the detection noise from the newest frame's residual (Rice's estimator).
 
-        The residual (standardized, (2,) [px]) comes from a fit of fixed length
+        The residual (standardized, two floats [px]) comes from a fit of fixed length
         (_NOISE_WINDOW frames): its systematic part (the path's curvature beyond a
         parabola at the window's end, a camera's calibration bias) is nearly the same
         at consecutive frames of a camera and cancels in their difference; the noise
@@ -1167,11 +1309,11 @@ class TrajectoryFuser(GatedEstimator):
         self._noise_residual[index] = (stamp, self._segment, residual)
         if last is not None and last[1] == self._segment and \
                 stamp - last[0] <= self.gate.max_gaps[self._names[index]]:
-            change = residual - last[2]
+            change_x, change_y = residual[0] - last[2][0], residual[1] - last[2][1]
             # Two axes, difference of two residuals: sample ~ sigma^2 * Exp(1), whose log has
             # mean log(sigma^2) - Euler's gamma. Averaging logs keeps rare large samples (a
             # curve the fit missed) from inflating the estimate.
-            sample = float(change @ change) / 4.0
+            sample = (change_x * change_x + change_y * change_y) / 4.0
             if sample > 0.0:
                 self._sigma_count += 1
                 alpha = max(_SIGMA_ALPHA, 1.0 / self._sigma_count)
