@@ -28,13 +28,13 @@ adds its own ``update``, ``process`` and ``_forget``.  ROS-free.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from .camera import Camera
 from .errors import FuserConfigError
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
-from .timing import Admitted, InputGate
+from .timing import Admitted, InputGate, stamp_sort_key
 
 __all__ = ['GatedEstimator', 'camera_list']
 
@@ -152,3 +152,36 @@ class GatedEstimator:
     def _fuse(self, item: Admitted) -> Estimate | None:
         """Estimate at one admitted observation (the method), or None (counted)."""
         raise NotImplementedError
+
+    def _supersedes(self, estimate: Estimate) -> bool:
+        """Whether ``estimate``, within the sync tolerance of another camera's, replaces it."""
+        return True
+
+    def process(self, observations: Iterable[Observation]) -> list[Estimate]:
+        """
+        Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
+
+        Observations are sorted by stamp first (ties keep their given order), so
+        rows of a file may come in any order.  One estimate per shutter event:
+        where two cameras' estimates are within ``sync_tolerance_ns`` of each
+        other (synchronized cameras), the later one, which saw both, supersedes
+        the first (as the method's :meth:`_supersedes` allows).  At the end, an
+        observation still held by the gate (a jump no camera confirmed) is
+        dropped as ``stamp_outlier``.
+
+        :param observations: the observations, any order
+        :return: the estimates in stamp order
+        """
+        estimates: list[Estimate] = []
+        for observation in sorted(observations, key=stamp_sort_key):
+            estimate = self.update(observation)
+            if estimate is None:
+                continue
+            if (estimates and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
+                    and estimates[-1].camera != estimate.camera
+                    and self._supersedes(estimate)):
+                estimates[-1] = estimate
+            else:
+                estimates.append(estimate)
+        self.gate.flush()
+        return estimates

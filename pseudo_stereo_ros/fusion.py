@@ -77,7 +77,7 @@ from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate
 from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate, Observation, Point3
 from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
-                     INPUT_DROP_REASONS, stamp_sort_key)
+                     INPUT_DROP_REASONS)
 from .trajectory import TrajectoryFuser
 
 __all__ = [
@@ -242,33 +242,9 @@ class Fuser(GatedEstimator):
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
 
-    def process(self, observations: Iterable[Observation]) -> list[Estimate]:
-        """
-        Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
-
-        Observations are sorted by stamp first (ties keep their given order), so
-        rows of a file may come in any order.  One estimate per shutter event:
-        where a synchronized pair's second observation gives the direct stereo
-        point, it supersedes the prediction made at the first.  At the end, an
-        observation still held by the gate (a jump no camera confirmed) is
-        dropped as ``stamp_outlier``.
-
-        :param observations: the observations, any order
-        :return: the estimates in stamp order
-        """
-        estimates: list[Estimate] = []
-        for observation in sorted(observations, key=stamp_sort_key):
-            estimate = self.update(observation)
-            if estimate is None:
-                continue
-            if (estimate.kind == 'sync' and estimates
-                    and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
-                    and estimates[-1].camera != estimate.camera):
-                estimates[-1] = estimate
-            else:
-                estimates.append(estimate)
-        self.gate.flush()
-        return estimates
+    def _supersedes(self, estimate: Estimate) -> bool:
+        """Only the direct stereo point of a synchronized pair replaces the prediction."""
+        return estimate.kind == 'sync'
 
     # -- methods --------------------------------------------------------------------------------
 

@@ -130,7 +130,7 @@ from __future__ import annotations
 
 import bisect
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 import math
 from typing import TypeAlias
 
@@ -140,8 +140,8 @@ from .camera import Camera
 from .errors import FuserConfigError
 from .estimator import GatedEstimator
 from .plausibility import DEFAULT_MAX_SPEED_MPS
-from .records import Estimate, Observation
-from .timing import Admitted, INPUT_DROP_REASONS, stamp_sort_key
+from .records import Estimate
+from .timing import Admitted, INPUT_DROP_REASONS
 
 __all__ = [
     'DEFAULT_CONSISTENCY',
@@ -545,32 +545,6 @@ class TrajectoryFuser(GatedEstimator):
                 return self._estimate(stamp, index)
         self._insert(frame)
         return self._estimate(stamp, index)
-
-    def process(self, observations: Iterable[Observation]) -> list[Estimate]:
-        """
-        Process recorded observations: the offline code path of ``track``, Table 1 and holdout.
-
-        Observations are sorted by stamp first (ties keep their order).  Where two
-        cameras' estimates are within ``sync_tolerance_ns`` of each other (synchronized
-        cameras), the later one, which saw both, supersedes the first.  At the end, an
-        observation still held by the gate (a jump no camera confirmed) is dropped as
-        ``stamp_outlier``.
-
-        :param observations: the observations, any order
-        :return: the estimates in stamp order
-        """
-        estimates: list[Estimate] = []
-        for observation in sorted(observations, key=stamp_sort_key):
-            estimate = self.update(observation)
-            if estimate is None:
-                continue
-            if (estimates and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
-                    and estimates[-1].camera != estimate.camera):
-                estimates[-1] = estimate
-            else:
-                estimates.append(estimate)
-        self.gate.flush()
-        return estimates
 
     # -- frames ---------------------------------------------------------------------------------
 
