@@ -40,9 +40,6 @@ resident memory of the target after 10% of the run and at its end.
 """
 
 import os
-from pathlib import Path
-import shutil
-import signal
 import struct
 import subprocess
 import sys
@@ -58,28 +55,17 @@ from rclpy.qos import HistoryPolicy, QoSProfile
 
 from .messages import observation_to_point
 from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
+from .processes import start_python, start_script, stop_processes
 from ..records import Observation
 from ..sim.scenarios import default_rig, make_scenario, shutter_stamps, truth_at
 
-__all__ = ['bench_load', 'console_script', 'relay_main', 'rss_growth', 'source_main']
+__all__ = ['bench_load', 'relay_main', 'rss_growth', 'source_main']
 
 #: Image point rate per camera [Hz] of the load row, and its receive -> publish p99 target.
 LOAD_RATE_HZ = 1000.0
 TARGET_P99_MS = 2.0
 WARM_UP_S = 0.5
 _NS = 1_000_000_000
-
-
-def console_script(name: str) -> str:
-    """Return the path of a console script of this installation (beside python, or on PATH)."""
-    candidate = Path(sys.executable).parent / name
-    if candidate.exists():
-        return str(candidate)
-    found = shutil.which(name)
-    if found is None:
-        raise FileNotFoundError(f'console script {name!r} not found beside {sys.executable} '
-                                'or on PATH')
-    return found
 
 
 def _cpus():
@@ -91,13 +77,6 @@ def _cpus():
     if len(cpus) < 2:
         return None, None
     return cpus[-1], set(cpus[:-1])
-
-
-def _pinned(cpus):
-    """Return a preexec_fn pinning a child process to ``cpus`` (None: no pinning)."""
-    if cpus is None:
-        return None
-    return lambda: os.sched_setaffinity(0, cpus)
 
 
 def _cpu_s(pid: int) -> Optional[float]:
@@ -211,21 +190,6 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
     return 0
 
 
-def _start(code: str, args: Sequence[str], cpus, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, '-c', code, *args], stdin=subprocess.DEVNULL,
-                            preexec_fn=_pinned(cpus), **kwargs)
-
-
-def _stop(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    try:
-        process.wait(timeout=15)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
-
-
 # -- the sink and the run -------------------------------------------------------------------------
 
 def _stamp_ns(data: bytes) -> int:
@@ -255,16 +219,15 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     target_cpu, others = _cpus()
     names = [camera.name for camera in default_rig()]
     if target == 'fuser':
-        process = subprocess.Popen(
-            [console_script('fuser'), '--executor', executor, '--ros-args', '-r',
-             f'__ns:=/{namespace}', '-p', 'reorder_window_s:=0.0', '--log-level', 'warn',
-             *[arg for parameter in parameters for arg in ('-p', parameter)]],
-            stdin=subprocess.DEVNULL, preexec_fn=_pinned(
-                None if target_cpu is None else {target_cpu}))
+        process = start_script(
+            'fuser', ['--executor', executor, '--ros-args', '-r', f'__ns:=/{namespace}', '-p',
+                      'reorder_window_s:=0.0', '--log-level', 'warn',
+                      *[arg for parameter in parameters for arg in ('-p', parameter)]],
+            cpus=None if target_cpu is None else {target_cpu})
     else:
-        process = _start('from pseudo_stereo_ros.ros.bench_load import relay_main\n'
-                         'raise SystemExit(relay_main())\n', [namespace, executor, *names],
-                         None if target_cpu is None else {target_cpu})
+        process = start_python('from pseudo_stereo_ros.ros.bench_load import relay_main\n'
+                               'raise SystemExit(relay_main())\n', [namespace, executor, *names],
+                               cpus=None if target_cpu is None else {target_cpu})
     own_affinity = os.sched_getaffinity(0) if others else None
     if others:
         os.sched_setaffinity(0, others)
@@ -295,10 +258,10 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
              until=lambda: node.count_publishers(position_topic) > 0 or process.poll() is not None)
         if process.poll() is not None:
             raise RuntimeError(f'the {target} process exited with status {process.returncode}')
-        source = _start('from pseudo_stereo_ros.ros.bench_load import source_main\n'
-                        'raise SystemExit(source_main())\n',
-                        [f'/{namespace}', str(rate_hz), str(seconds)], others,
-                        stdout=subprocess.PIPE, text=True)
+        source = start_python('from pseudo_stereo_ros.ros.bench_load import source_main\n'
+                              'raise SystemExit(source_main())\n',
+                              [f'/{namespace}', str(rate_hz), str(seconds)], cpus=others,
+                              stdout=subprocess.PIPE, text=True)
         started = time.monotonic()
         cpu_start = _cpu_s(process.pid)
         next_sample = started
@@ -329,7 +292,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
             source.kill()
             source.wait()
         close([], context=context)
-        _stop(process)
+        stop_processes([process], timeout_s=15.0)
         if own_affinity:
             os.sched_setaffinity(0, own_affinity)
     since = first_ns + int(WARM_UP_S * _NS)
