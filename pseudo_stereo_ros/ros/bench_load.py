@@ -20,10 +20,11 @@ Three processes on loopback DDS:
 * a **source** publishes ``camera1`` and ``camera2`` image points at
   ``rate_hz`` each (camera 2 half a period after camera 1: 2,000
   messages/s at 1 kHz), the turntable scenario seen by the default rig
-  with 0.3 px noise.  Each point is stamped with the wall-clock time it is
-  due and published then, so ``received - stamp`` at the end of the chain
-  is the whole delay: the source's own lateness, two DDS hops and the
-  node's queueing and work;
+  with 0.3 px noise.  Each point is published when it is due and stamped
+  with the wall-clock time of its publication, so ``received - stamp`` at
+  the end of the chain is two DDS hops and the target's queueing and work,
+  without the source's own lateness (reported apart: a source starved of
+  CPU published up to 260 ms late, which made the row measure the source);
 * the **target**, pinned to one core (the last one): the ``fuser``
   console script with its defaults (``reorder_window_s`` 0, marker and
   diagnostics timers on), or, as the baseline, a **bare relay**: a node
@@ -33,7 +34,9 @@ Three processes on loopback DDS:
   ``/diagnostics`` and samples the target's resident memory every second.
 
 Reported: receive -> publish latency (source stamp -> sink) p50 / p99 /
-max after a 0.5 s warm-up; inputs lost (sent minus what the target took:
+max after a 0.5 s warm-up; the fuser's own work per point (callback start
+-> position published, from its ``/diagnostics``: the median of each
+second's p50, the worst second's p99); inputs lost (sent minus what the target took:
 the fuser's ``observations`` on ``/diagnostics``, the relay's outputs);
 outputs lost (the fuser's ``estimates`` minus ``ball/position`` received);
 resident memory of the target after 10% of the run and at its end.
@@ -53,7 +56,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile
 
-from .messages import observation_to_point
+from .messages import ns_to_stamp, observation_to_point
 from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
 from .processes import start_python, start_script, stop_processes
 from ..records import Observation
@@ -151,7 +154,11 @@ def source_main(argv: Optional[List[str]] = None) -> int:
             delay = (stamp - time.time_ns()) / _NS
             if delay > 0:
                 time.sleep(delay)
-            lateness.append(time.time_ns() - stamp)
+            # Stamped when published, not when due: a late source (a busy machine) must not
+            # count as the target's latency; its lateness is reported on its own.
+            now = time.time_ns()
+            lateness.append(now - stamp)
+            message.header.stamp = ns_to_stamp(now)
             topics[index].publish(message)
             sent += 1
         for publisher in publishers.values():
@@ -212,7 +219,9 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     :param parameters: more ``name:=value`` parameters of the fuser
     :return: ``latencies_s`` (after the warm-up), ``sent``, ``taken`` (inputs the target
         took), ``outputs`` (messages it published; None when unknown), ``received``,
-        ``rss_kb`` [(seconds since start, kB)], ``source_late_p99_ms``, ``cpu_fraction`` (CPU
+        ``rss_kb`` [(seconds since start, kB)], ``source_late_p99_ms``, ``work_p50_ms`` and
+        ``work_p99_ms`` (the fuser's own point received -> published: median of the seconds'
+        p50, worst second's p99; None for the relay), ``cpu_fraction`` (CPU
         time of the target / wall time while the source ran; 1.0 = one core busy)
     """
     namespace = f'bench_load_{os.getpid()}_{target}'
@@ -235,6 +244,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     rclpy.init(args=[], context=context)
     arrivals: List[tuple] = []
     diagnostics: Dict[str, float] = {}
+    work: Dict[str, List[float]] = {}  # 'p50', 'p99' -> each /diagnostics period's [ms]
     source = None
     rss: List[tuple] = []
     try:
@@ -250,6 +260,8 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
                     for item in status.values:
                         if item.key in ('observations', 'estimates'):
                             diagnostics[item.key] = float(item.value)
+                        elif item.key.startswith('point received -> published p'):
+                            work.setdefault(item.key.split()[-2], []).append(float(item.value))
         node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
         executor_ = make_executor('events', context=context)
         executor_.add_node(node)
@@ -304,6 +316,8 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     return {'latencies_s': latencies, 'sent': sent, 'taken': taken,
             'outputs': None if outputs is None else int(outputs), 'received': len(arrivals),
             'rss_kb': rss, 'source_late_p99_ms': late_p99,
+            'work_p50_ms': float(np.median(work['p50'])) if work.get('p50') else None,
+            'work_p99_ms': max(work['p99']) if work.get('p99') else None,
             'cpu_fraction': (cpu_end - cpu_start) / cpu_wall if None not in (cpu_start, cpu_end)
             else float('nan')}
 

@@ -616,6 +616,10 @@ def _load_rows(seconds: float, executor: str, soak: bool) -> Tuple[List[str], in
                  f'CPU {result["cpu_fraction"]:.0%} of a core; '
                  f'RSS {early / 1024:.1f} -> {late / 1024:.1f} MiB')
         if result is fuser:
+            if result['work_p99_ms'] is not None:
+                extra += (f'; in the node: point received -> published p50 '
+                          f'{result["work_p50_ms"]:.3f}, p99 {result["work_p99_ms"]:.2f} ms '
+                          '(worst second)')
             rows.append(_row(label, latencies, target_p99_ms=TARGET_P99_MS,
                              baseline=relay['latencies_s'], extra=extra))
         else:
@@ -624,8 +628,8 @@ def _load_rows(seconds: float, executor: str, soak: bool) -> Tuple[List[str], in
             rows.append(f'  {label.strip()}: nothing received (DDS discovery failed?)')
             status = 1
     late = fuser['source_late_p99_ms']
-    rows.append(f'  (executor {executor}; {seconds:g} s; the lateness of the source itself, '
-                f'p99 {late:.2f} ms, is part of both rows)')
+    rows.append(f'  (executor {executor}; {seconds:g} s; points stamped when published: the '
+                f"source's own lateness, p99 {late:.2f} ms, is not in the rows)")
     return rows, status
 
 

@@ -21,8 +21,14 @@ signal that the node handles as a clean shutdown (SIGINT or SIGTERM: rclpy's
 handler), killed after a timeout, so that no benchmark or test leaves a node
 running.  Pipes are drained while waiting (a child blocked on a full pipe
 never stops).
+
+:func:`offset_worker` is the process a node hands heavy Python work to (the
+fuser's online time-offset estimate), so that the work does not hold the
+node's global interpreter lock while messages wait.
 """
 
+from concurrent.futures import ProcessPoolExecutor
+import multiprocessing
 import os
 from pathlib import Path
 import shutil
@@ -31,7 +37,7 @@ import subprocess
 import sys
 from typing import Iterable, List, Optional, Sequence, Set, Tuple
 
-__all__ = ['console_script', 'start_python', 'start_script', 'stop_processes']
+__all__ = ['console_script', 'offset_worker', 'start_python', 'start_script', 'stop_processes']
 
 
 def console_script(name: str) -> str:
@@ -113,3 +119,41 @@ def stop_processes(processes: Iterable[Optional[subprocess.Popen]], *,
             process.kill()
             outputs.append(process.communicate())
     return outputs
+
+
+def _background_worker() -> None:
+    """
+    Make this worker process background work: the lowest CPU priority, no Ctrl-C.
+
+    SCHED_IDLE (Linux) runs it only when its CPUs have nothing else to run, so on the node's
+    core it takes idle time only (else the lowest nice value); the parent alone handles
+    Ctrl-C (a worker printed a KeyboardInterrupt traceback).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        try:
+            os.nice(19)
+        except OSError:
+            pass
+
+
+def offset_worker() -> ProcessPoolExecutor:
+    """
+    Return a one-process pool for :func:`~pseudo_stereo_ros.timesync.run_offset_job`.
+
+    The process is forked from multiprocessing's fork server (a fresh
+    interpreter that has imported :mod:`pseudo_stereo_ros.timesync`, shared
+    by every pool of this process), never from the node's process itself,
+    whose DDS threads a fork would copy in an unknown state.  It runs at the
+    lowest CPU priority (SCHED_IDLE: on the node's core it takes idle time
+    only), ignores SIGINT (the node shuts it down) and ends with the node's
+    process.
+
+    :return: the pool (``shutdown()`` it when done)
+    """
+    context = multiprocessing.get_context('forkserver')
+    context.set_forkserver_preload(['pseudo_stereo_ros.timesync'])
+    return ProcessPoolExecutor(max_workers=1, mp_context=context,
+                               initializer=_background_worker)
