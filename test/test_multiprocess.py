@@ -26,9 +26,9 @@ position (so both detector -> fuser connections are matched, and reliable
 from then on), and each image is followed by waiting for its image point.
 Every process showing in this process's graph is not enough: Fast DDS
 matches the detector and fuser processes' reliable endpoints with each other
-up to seconds later (measured: 0.6-3 s, more under load), and a fixed
-warm-up flight played as fast as the detectors answer (about 2.5 s on an
-idle machine) sometimes ended before that.
+up to seconds later (up to 2.1 s in six instrumented runs, longer in the
+failing ones), and one fixed warm-up flight played as fast as the
+detectors answer (about 2.5 s on a quiet machine) sometimes ended first.
 """
 
 import os
