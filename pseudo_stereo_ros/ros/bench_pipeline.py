@@ -628,8 +628,8 @@ def _load_rows(seconds: float, executor: str, soak: bool) -> Tuple[List[str], in
             rows.append(f'  {label.strip()}: nothing received (DDS discovery failed?)')
             status = 1
     late = fuser['source_late_p99_ms']
-    rows.append(f'  (executor {executor}; {seconds:g} s; points stamped when published: the '
-                f"source's own lateness, p99 {late:.2f} ms, is not in the rows)")
+    rows.append(f'  (executor {executor}; {seconds:g} s; the lateness of the source itself, '
+                f'p99 {late:.2f} ms, is part of both rows: mostly back-pressure from the target)')
     return rows, status
 
 
