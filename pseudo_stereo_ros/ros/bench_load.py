@@ -24,9 +24,9 @@ Three processes on loopback DDS:
   due and published then, so ``received - stamp`` at the end of the chain
   is the whole delay: the source's own lateness, two DDS hops and the
   node's queueing and work.  The source's lateness is printed on its own:
-  it is mostly back-pressure (a reliable writer waits for a reader that
-  stalls), 220-265 ms at p99 with the fuser whose offset estimate stalled
-  it, 2-3 ms otherwise, so it belongs in the row;
+  it rises and falls with the target's stalls (back-pressure through the
+  reliable topics: up to 265 ms at p99 while the fuser's offset estimate
+  stalled it, 2-3 ms otherwise), so it belongs in the row;
 * the **target**, pinned to one core (the last one): the ``fuser``
   console script with its defaults (``reorder_window_s`` 0, marker and
   diagnostics timers on), or, as the baseline, a **bare relay**: a node
