@@ -171,9 +171,7 @@ class FuserNode(Node):
         self._target_ns = dict(self._applied_ns)
         self._last_raw_ns = {}
         self.offset_estimator = None
-        # The process running the online estimate: started with the first estimate (a node
-        # started and stopped without data starts none; the helper processes hold its stdout).
-        self._estimates = None
+        self._estimates = None  # the process running the online estimate
         self._pending = None  # the estimate running there
         if offset_period_s > 0:
             self.offset_estimator = OnlineOffsetEstimator(self.cameras, self.offsets_s,
@@ -233,6 +231,9 @@ class FuserNode(Node):
         if diagnostics_period_s > 0:
             self.create_timer(diagnostics_period_s, self._publish_diagnostics)
         if self.offset_estimator is not None:
+            # Started now: starting it at the first estimate stalled fusion for about a second.
+            self._estimates = offset_worker()
+            self._estimates.submit(int)
             self.create_timer(offset_period_s, self._estimate_offsets)
         self.get_logger().info(
             f'fusing {", ".join(names)} with method {method!r} -> '
