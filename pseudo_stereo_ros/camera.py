@@ -64,6 +64,11 @@ def _fisheye_undistort(pts: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndar
 _UNDISTORT = _undistort_function()
 
 
+def _camera(calibration: CameraCalibration, name: str) -> Camera:
+    """Rebuild a pickled :class:`Camera`."""
+    return Camera(calibration, name=name)
+
+
 def _point3(values: Iterable[float]) -> Point3:
     """Return three numbers as a plain-float (x, y, z) tuple."""
     x, y, z = values
@@ -104,6 +109,10 @@ class Camera:
 
     def __repr__(self) -> str:
         return f'Camera({self.name!r}, center={np.round(self.center, 3).tolist()})'
+
+    def __reduce__(self):
+        """Pickle as the calibration and the name (to run work in another process)."""
+        return _camera, (self.calibration, self.name)
 
     # -- world -> image -------------------------------------------------------------------------
 

@@ -67,7 +67,7 @@ from collections import deque
 from dataclasses import dataclass, field
 import math
 import threading
-from typing import Deque, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Deque, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -88,9 +88,11 @@ __all__ = [
     'MIN_SAMPLES',
     'VARIES_RATIO',
     'OffsetEstimate',
+    'OffsetJob',
     'OnlineOffsetEstimator',
     'PairOffset',
     'estimate_time_offsets',
+    'run_offset_job',
 ]
 
 #: Fewest compared samples of a pair for an estimate (fewer: "too short").
@@ -619,6 +621,38 @@ def _combine(names: List[str], given: Mapping[str, float],
 
 # -- online -------------------------------------------------------------------------------------
 
+class OffsetJob(NamedTuple):
+    """
+    One online estimate's input, cheap to pickle (it may run in another process).
+
+    ``stamps`` and ``pixels`` hold each camera's window: (N,) int64 raw stamps [ns] and
+    (N, 2) raw pixels [px].
+    """
+
+    cameras: List[Camera]
+    stamps: Dict[str, np.ndarray]
+    pixels: Dict[str, np.ndarray]
+    offsets_s: Dict[str, float]
+    max_gap_s: float
+    max_uncertainty_s: float
+    half_width_s: Optional[float]
+
+
+def run_offset_job(job: OffsetJob) -> OffsetEstimate:
+    """
+    Run one online estimate (reference pairs only, no jackknife: bounded work).
+
+    :param job: from :meth:`OnlineOffsetEstimator.snapshot`
+    :return: the estimate
+    """
+    observations = [Observation(name, stamp, u, v) for name, stamps in job.stamps.items()
+                    for stamp, (u, v) in zip(stamps.tolist(), job.pixels[name].tolist())]
+    return estimate_time_offsets(
+        job.cameras, [observations], offsets_s=job.offsets_s, max_gap_s=job.max_gap_s,
+        max_uncertainty_s=job.max_uncertainty_s, all_pairs=False, jackknife=False,
+        half_width_s=job.half_width_s)
+
+
 class OnlineOffsetEstimator:
     """
     The sliding-window estimate of the fuser node: feed raw observations, ask for offsets.
@@ -627,8 +661,11 @@ class OnlineOffsetEstimator:
     per camera) and runs :func:`estimate_time_offsets` on them (pairs with the
     reference camera only, to bound the work per update).  Each update
     searches around the previous estimate, so a slowly drifting offset is
-    followed.  :meth:`add` and :meth:`update` may run in different threads
-    (the fuser node estimates in a worker thread, so fusion never waits).
+    followed.  :meth:`add` and :meth:`update` may run in different threads;
+    :meth:`update` is :meth:`snapshot`, :func:`run_offset_job` and
+    :meth:`accept`, so the work can also run in another process (the fuser
+    node does: a thread would hold Python's global lock for tens of
+    milliseconds per update and stall fusion).
 
     :param cameras: the cameras in order; the first is the reference
     :param offsets_s: the configured offsets [s] (the reference keeps its own)
@@ -690,21 +727,42 @@ class OnlineOffsetEstimator:
 
     def update(self) -> Optional[OffsetEstimate]:
         """Estimate from the window; return it (also in :attr:`latest`), or None without data."""
+        job = self.snapshot()
+        if job is None:
+            return None
+        return self.accept(run_offset_job(job))
+
+    def snapshot(self) -> Optional['OffsetJob']:
+        """
+        Take the window for an estimate that may run elsewhere (another process).
+
+        :return: the job for :func:`run_offset_job` (pass its result to :meth:`accept`), or
+            None without data
+        """
         with self._lock:
             self._prune()
-            observations = [Observation(name, *row) for name, rows in self._samples.items()
-                            for row in rows]
+            rows = {name: list(samples) for name, samples in self._samples.items()}
             self.added = 0
-        if not observations:
+        if not any(rows.values()):
             return None
+        stamps = {name: np.array([row[0] for row in values], dtype=np.int64).reshape(-1)
+                  for name, values in rows.items()}
+        pixels = {name: np.array([row[1:] for row in values], dtype=float).reshape(-1, 2)
+                  for name, values in rows.items()}
         # Once every camera has a usable estimate, search only near it (a drift is followed,
         # a jump of more than the half width is not: it needs a restart).  The jackknife is left
         # out to bound the work per update; the uncertainty is the noise value alone.
         narrow = self._settled and _ONLINE_HALF_WIDTH_S or None
-        estimate = estimate_time_offsets(
-            self.cameras, [observations], offsets_s=self._center, max_gap_s=self.max_gap_s,
-            max_uncertainty_s=self.max_uncertainty_s, all_pairs=False, jackknife=False,
-            half_width_s=narrow)
+        return OffsetJob(self.cameras, stamps, pixels, dict(self._center), self.max_gap_s,
+                         self.max_uncertainty_s, narrow)
+
+    def accept(self, estimate: OffsetEstimate) -> OffsetEstimate:
+        """
+        Make an estimate of a :meth:`snapshot` the latest; the next search centres on it.
+
+        :param estimate: the result of :func:`run_offset_job`
+        :return: the estimate
+        """
         self.latest = estimate
         for name in self._center:
             if name != estimate.reference and self.usable(name):

@@ -47,8 +47,14 @@ def namespace():
     return f'/offsets{os.getpid()}_{next(_COUNTER)}'
 
 
-def _run(context, namespace, overrides, observations, *, pause_after=None, pause_s=0.0):
-    """Publish observations in order; return (node, received (stamp, x, y, z), diagnostics)."""
+def _run(context, namespace, overrides, observations, *, pause_after=None, pause_s=0.0,
+         pause_until=None):
+    """
+    Publish observations in order; return (node, received (stamp, x, y, z), diagnostics).
+
+    After ``pause_after`` observations, spin ``pause_s`` seconds of wall time, or until
+    ``pause_until(diagnostics)`` is true (at most ``pause_s``).
+    """
     fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=overrides)
     probe = rclpy.create_node('probe', namespace=namespace, context=context)
     executor = SingleThreadedExecutor(context=context)
@@ -73,8 +79,8 @@ def _run(context, namespace, overrides, observations, *, pause_after=None, pause
             publishers[observation.camera].publish(observation_to_point(observation))
             assert spin_until(lambda: fuser.fuser.stats['observations']
                               + len(fuser.buffer) >= count)
-            if count == pause_after:
-                spin_until(lambda: False, pause_s)  # wall time for the estimation timer
+            if count == pause_after:  # wall time for the estimation timer
+                spin_until(lambda: pause_until is not None and pause_until(diagnostics), pause_s)
         spin_until(lambda: not len(fuser.buffer), 2.0)
         spin_until(lambda: False, 0.1)
     finally:
@@ -111,7 +117,11 @@ def test_online_estimate_is_reported_and_applied_without_going_back(context, nam
         Parameter('time_offset_update_period_s', value=0.2),
         Parameter('time_offset_max_slew', value=0.05),
         Parameter('diagnostics_period_s', value=0.2)],
-        recording.observations, pause_after=split, pause_s=0.6)
+        recording.observations, pause_after=split, pause_s=30.0,
+        # The estimate runs in a worker process: the pause lasts until it is reported.
+        pause_until=lambda arrays: any(kv.key == 'time offset camera2 estimate [ms]'
+                                       for array in arrays for status in array.status
+                                       for kv in status.values))
     estimate = fuser.offset_estimator.latest
     assert abs(estimate.offsets_s['camera2'] - 0.010) < 0.5e-3
     # Applied: slewed to the estimate (0.05 s per s: 10 ms within 0.2 s of stamps); the last

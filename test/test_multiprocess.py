@@ -21,13 +21,19 @@ checks that ``/ball/position`` carries one message per shutter event, with
 the events' stamps and the positions the core ``fuse()`` (the code path of
 ``pseudo_stereo track``) computes from the same image points.
 
-No sleeps synchronize: a warm-up flight runs until the fuser publishes a
+No sleeps synchronize: warm-up flights run until the fuser publishes a
 position (so both detector -> fuser connections are matched, and reliable
 from then on), and each image is followed by waiting for its image point.
+Every process showing in this process's graph is not enough: Fast DDS
+matches the detector and fuser processes' reliable endpoints with each other
+up to seconds later (up to 2.1 s in six instrumented runs, longer in the
+failing ones), and one fixed warm-up flight played as fast as the
+detectors answer (about 2.5 s on a quiet machine) sometimes ended first.
 """
 
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import time
@@ -36,6 +42,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from pseudo_stereo_ros.fusion import fuse
 from pseudo_stereo_ros.ros.messages import array_to_image, point_to_observation, point_to_xyz
+from pseudo_stereo_ros.ros.processes import start_script, stop_processes
 from pseudo_stereo_ros.sim.rendering import BallRenderer
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario,
                                              shutter_stamps, truth_at)
@@ -52,25 +59,11 @@ os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(
     Path(__file__).resolve().parent.parent / 'config' / 'fastdds_large_images.xml'))
 
 
-def _start(args, **kwargs):
-    return subprocess.Popen([str(BIN / args[0])] + list(args[1:]), stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+def _start(args):
+    return start_script(args[0], args[1:], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                        text=True)
 
 
-def _stop(processes):
-    for process in processes:
-        process.terminate()
-    for process in processes:
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-@pytest.mark.xfail(strict=False, reason='known intermittent since this round: the fuser '
-                   'process sometimes publishes no position for a whole flight (about 1 run '
-                   'in 3 here); see the closing note of the session')
 def test_detector_and_fuser_processes(tmp_path):
     namespace = f'mp{os.getpid()}'
     params = tmp_path / 'params.yaml'
@@ -126,13 +119,17 @@ def test_detector_and_fuser_processes(tmp_path):
                           and node.count_publishers(f'/{namespace}/ball/position')
                           and all(node.count_subscribers(f'/{namespace}/{c.name}/ball/image_point')
                                   >= 2 for c in cameras), 30.0), 'processes did not come up'
-        # Warm-up flight, 10 s before the measured one (far beyond max_gap: a fresh start).
-        warm_epoch = DEFAULT_EPOCH_NS - 10_000_000_000
-        for stamp, index in events(warm_epoch, 5.0):
-            play(stamp, index, warm_epoch)
-            if positions:
-                break
-        assert positions, 'no position from the warm-up flight'
+        # Warm-up flights, each 10 s before the previous one (far beyond max_gap: a fresh
+        # start, and a jump both cameras agree on), until the fuser publishes a position.
+        deadline = time.monotonic() + 60.0
+        warm_epoch = DEFAULT_EPOCH_NS
+        while not positions and time.monotonic() < deadline:
+            warm_epoch -= 10_000_000_000
+            for stamp, index in events(warm_epoch, 5.0):
+                play(stamp, index, warm_epoch)
+                if positions or time.monotonic() > deadline:
+                    break
+        assert positions, 'no position from the fuser process within 60 s of warm-up flights'
         start = len(points)
         played = events(DEFAULT_EPOCH_NS, 1.0)
         lost = sum(not play(stamp, index, DEFAULT_EPOCH_NS) for stamp, index in played)
@@ -144,7 +141,7 @@ def test_detector_and_fuser_processes(tmp_path):
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-        _stop(processes)
+        stop_processes(processes, signal_number=signal.SIGTERM)
     # Best-effort images on loopback: nearly every event is detected.
     assert lost <= 0.1 * len(played) and len(measured) >= 0.9 * len(played)
     assert len(expected) >= len(measured) - 3  # one estimate per event after warm-up

@@ -27,6 +27,7 @@ from pathlib import Path
 import re
 import subprocess
 import sys
+import threading
 import time
 
 from pseudo_stereo_ros.ros.fuser_node import FuserNode
@@ -134,15 +135,21 @@ def test_the_fuser_executable_warns_about_a_typo_in_one_line(tmp_path):
         [str(BIN / 'fuser'), '--ros-args', '-r', f'__ns:=/typo{os.getpid()}', '--params-file',
          path], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines = []
+    guard = threading.Timer(60.0, process.kill)  # a missing warning fails, never hangs
+    guard.start()
     try:
+        # The warning comes after construction ('fusing'), before spinning; read until the
+        # first line after it (the node logs nothing else then), not until the pipe closes.
+        fusing = False
         for line in process.stdout:
             lines.append(line)
-            if 'fusing' in line:  # the warning comes after construction, before spinning
+            if fusing:
                 break
+            fusing = 'fusing' in line
     finally:
+        guard.cancel()
         process.terminate()
-        output, _ = process.communicate(timeout=30)
-        lines.append(output)
+        process.wait(timeout=30)
     text = ''.join(lines)
     warned = [line for line in text.splitlines() if 'sync_tolerence_s' in line]
     assert len(warned) == 1 and 'WARN' in warned[0], text

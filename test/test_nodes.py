@@ -439,6 +439,12 @@ def test_fuser_publishes_diagnostics_and_the_trail_marker(context, namespace):
     # Every observation gives an estimate or exactly one drop reason.
     assert values['estimates'] + _drops(values) == len(observations)
     assert _late(values) == [0]
+    # The node's own work per point (callback -> published) in each period with points.
+    key = 'point received -> published {} [ms]'
+    timed = [v for _, v in filter(None, reports) if key.format('p50') in v]
+    assert timed
+    assert all(0 < v[key.format('p50')] <= v[key.format('p99')] <= v[key.format('max')]
+               for v in timed)
     # Camera 2's shutter is 1/60 s after camera 1's, camera 1's next 1/60 s after that.
     for key in ('camera1->camera2', 'camera2->camera1'):
         assert values[f'delta {key} mean [ms]'] == pytest.approx(1e3 / 60, abs=1e-3)

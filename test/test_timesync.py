@@ -25,6 +25,7 @@ offset is observable.
 
 from dataclasses import replace
 import math
+import pickle
 
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
@@ -36,7 +37,8 @@ from pseudo_stereo_ros.offsets import apply_time_offsets, camera_time_offsets
 from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
                                              observe, Scenario, shutter_stamps)
-from pseudo_stereo_ros.timesync import estimate_time_offsets, OnlineOffsetEstimator
+from pseudo_stereo_ros.timesync import (estimate_time_offsets, OnlineOffsetEstimator,
+                                        run_offset_job)
 import pytest
 
 FLIGHTS = ('spiral', 'bounce', 'straight')
@@ -180,6 +182,29 @@ def test_online_estimate_converges_within_seconds_of_flight(cameras):
     # A replay looping (stamps jump back by more than the window) starts the window afresh.
     estimator.add(recording.observations[0]._replace(stamp_ns=start - 20_000_000_000))
     assert sum(len(samples) for samples in estimator._samples.values()) == 1
+
+
+def test_online_estimate_in_another_process_is_the_same_estimate(cameras):
+    # The fuser node runs the update as snapshot -> run_offset_job (in a worker process, the
+    # job pickled) -> accept: the same numbers as the direct call on the same window.
+    recording = simulate_flights(cameras, offsets_s={'camera2': 0.010}, fps=30.0,
+                                 noise_px=0.3, seed=4, scenarios=FLIGHTS)
+    estimator = OnlineOffsetEstimator(cameras, {}, window_s=10.0)
+    for obs in recording.observations[:400]:
+        estimator.add(obs)
+    job = estimator.snapshot()
+    window = [Observation(name, *row) for name, rows in estimator._samples.items()
+              for row in rows]
+    direct = estimate_time_offsets(cameras, [window], offsets_s={c.name: 0.0 for c in cameras},
+                                   all_pairs=False, jackknife=False)
+    copied = pickle.loads(pickle.dumps(job))
+    assert [c.name for c in copied.cameras] == [c.name for c in cameras]
+    np.testing.assert_array_equal(copied.cameras[1].project(np.array([[0.1, 0.2, 1.5]])),
+                                  cameras[1].project(np.array([[0.1, 0.2, 1.5]])))
+    remote = estimator.accept(run_offset_job(copied))
+    assert remote.offsets_s == direct.offsets_s and remote.uncertainty_s == direct.uncertainty_s
+    assert estimator.latest is remote and estimator.usable('camera2')
+    assert abs(remote.offsets_s['camera2'] - 0.010) < 0.5e-3
 
 
 def test_paper_method_with_estimated_offsets_is_as_good_as_with_true_ones(cameras):

@@ -23,7 +23,10 @@ Three processes on loopback DDS:
   with 0.3 px noise.  Each point is stamped with the wall-clock time it is
   due and published then, so ``received - stamp`` at the end of the chain
   is the whole delay: the source's own lateness, two DDS hops and the
-  node's queueing and work;
+  node's queueing and work.  The source's lateness is printed on its own:
+  it rises and falls with the target's stalls (back-pressure through the
+  reliable topics: up to 265 ms at p99 while the fuser's offset estimate
+  stalled it, 2-3 ms otherwise), so it belongs in the row;
 * the **target**, pinned to one core (the last one): the ``fuser``
   console script with its defaults (``reorder_window_s`` 0, marker and
   diagnostics timers on), or, as the baseline, a **bare relay**: a node
@@ -33,16 +36,15 @@ Three processes on loopback DDS:
   ``/diagnostics`` and samples the target's resident memory every second.
 
 Reported: receive -> publish latency (source stamp -> sink) p50 / p99 /
-max after a 0.5 s warm-up; inputs lost (sent minus what the target took:
+max after a 0.5 s warm-up; the fuser's own work per point (callback start
+-> position published, from its ``/diagnostics``: the median of each
+second's p50, the worst second's p99); inputs lost (sent minus what the target took:
 the fuser's ``observations`` on ``/diagnostics``, the relay's outputs);
 outputs lost (the fuser's ``estimates`` minus ``ball/position`` received);
 resident memory of the target after 10% of the run and at its end.
 """
 
 import os
-from pathlib import Path
-import shutil
-import signal
 import struct
 import subprocess
 import sys
@@ -58,28 +60,17 @@ from rclpy.qos import HistoryPolicy, QoSProfile
 
 from .messages import observation_to_point
 from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
+from .processes import start_python, start_script, stop_processes
 from ..records import Observation
 from ..sim.scenarios import default_rig, make_scenario, shutter_stamps, truth_at
 
-__all__ = ['bench_load', 'console_script', 'relay_main', 'rss_growth', 'source_main']
+__all__ = ['bench_load', 'relay_main', 'rss_growth', 'source_main']
 
 #: Image point rate per camera [Hz] of the load row, and its receive -> publish p99 target.
 LOAD_RATE_HZ = 1000.0
 TARGET_P99_MS = 2.0
 WARM_UP_S = 0.5
 _NS = 1_000_000_000
-
-
-def console_script(name: str) -> str:
-    """Return the path of a console script of this installation (beside python, or on PATH)."""
-    candidate = Path(sys.executable).parent / name
-    if candidate.exists():
-        return str(candidate)
-    found = shutil.which(name)
-    if found is None:
-        raise FileNotFoundError(f'console script {name!r} not found beside {sys.executable} '
-                                'or on PATH')
-    return found
 
 
 def _cpus():
@@ -91,13 +82,6 @@ def _cpus():
     if len(cpus) < 2:
         return None, None
     return cpus[-1], set(cpus[:-1])
-
-
-def _pinned(cpus):
-    """Return a preexec_fn pinning a child process to ``cpus`` (None: no pinning)."""
-    if cpus is None:
-        return None
-    return lambda: os.sched_setaffinity(0, cpus)
 
 
 def _cpu_s(pid: int) -> Optional[float]:
@@ -211,21 +195,6 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
     return 0
 
 
-def _start(code: str, args: Sequence[str], cpus, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, '-c', code, *args], stdin=subprocess.DEVNULL,
-                            preexec_fn=_pinned(cpus), **kwargs)
-
-
-def _stop(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    try:
-        process.wait(timeout=15)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
-
-
 # -- the sink and the run -------------------------------------------------------------------------
 
 def _stamp_ns(data: bytes) -> int:
@@ -248,23 +217,24 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     :param parameters: more ``name:=value`` parameters of the fuser
     :return: ``latencies_s`` (after the warm-up), ``sent``, ``taken`` (inputs the target
         took), ``outputs`` (messages it published; None when unknown), ``received``,
-        ``rss_kb`` [(seconds since start, kB)], ``source_late_p99_ms``, ``cpu_fraction`` (CPU
+        ``rss_kb`` [(seconds since start, kB)], ``source_late_p99_ms``, ``work_p50_ms`` and
+        ``work_p99_ms`` (the fuser's own point received -> published: median of the seconds'
+        p50, worst second's p99; None for the relay), ``cpu_fraction`` (CPU
         time of the target / wall time while the source ran; 1.0 = one core busy)
     """
     namespace = f'bench_load_{os.getpid()}_{target}'
     target_cpu, others = _cpus()
     names = [camera.name for camera in default_rig()]
     if target == 'fuser':
-        process = subprocess.Popen(
-            [console_script('fuser'), '--executor', executor, '--ros-args', '-r',
-             f'__ns:=/{namespace}', '-p', 'reorder_window_s:=0.0', '--log-level', 'warn',
-             *[arg for parameter in parameters for arg in ('-p', parameter)]],
-            stdin=subprocess.DEVNULL, preexec_fn=_pinned(
-                None if target_cpu is None else {target_cpu}))
+        process = start_script(
+            'fuser', ['--executor', executor, '--ros-args', '-r', f'__ns:=/{namespace}', '-p',
+                      'reorder_window_s:=0.0', '--log-level', 'warn',
+                      *[arg for parameter in parameters for arg in ('-p', parameter)]],
+            cpus=None if target_cpu is None else {target_cpu})
     else:
-        process = _start('from pseudo_stereo_ros.ros.bench_load import relay_main\n'
-                         'raise SystemExit(relay_main())\n', [namespace, executor, *names],
-                         None if target_cpu is None else {target_cpu})
+        process = start_python('from pseudo_stereo_ros.ros.bench_load import relay_main\n'
+                               'raise SystemExit(relay_main())\n', [namespace, executor, *names],
+                               cpus=None if target_cpu is None else {target_cpu})
     own_affinity = os.sched_getaffinity(0) if others else None
     if others:
         os.sched_setaffinity(0, others)
@@ -272,6 +242,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     rclpy.init(args=[], context=context)
     arrivals: List[tuple] = []
     diagnostics: Dict[str, float] = {}
+    work: Dict[str, List[float]] = {}  # 'p50', 'p99' -> each /diagnostics period's [ms]
     source = None
     rss: List[tuple] = []
     try:
@@ -287,6 +258,8 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
                     for item in status.values:
                         if item.key in ('observations', 'estimates'):
                             diagnostics[item.key] = float(item.value)
+                        elif item.key.startswith('point received -> published p'):
+                            work.setdefault(item.key.split()[-2], []).append(float(item.value))
         node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
         executor_ = make_executor('events', context=context)
         executor_.add_node(node)
@@ -295,10 +268,10 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
              until=lambda: node.count_publishers(position_topic) > 0 or process.poll() is not None)
         if process.poll() is not None:
             raise RuntimeError(f'the {target} process exited with status {process.returncode}')
-        source = _start('from pseudo_stereo_ros.ros.bench_load import source_main\n'
-                        'raise SystemExit(source_main())\n',
-                        [f'/{namespace}', str(rate_hz), str(seconds)], others,
-                        stdout=subprocess.PIPE, text=True)
+        source = start_python('from pseudo_stereo_ros.ros.bench_load import source_main\n'
+                              'raise SystemExit(source_main())\n',
+                              [f'/{namespace}', str(rate_hz), str(seconds)], cpus=others,
+                              stdout=subprocess.PIPE, text=True)
         started = time.monotonic()
         cpu_start = _cpu_s(process.pid)
         next_sample = started
@@ -329,7 +302,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
             source.kill()
             source.wait()
         close([], context=context)
-        _stop(process)
+        stop_processes([process], timeout_s=15.0)
         if own_affinity:
             os.sched_setaffinity(0, own_affinity)
     since = first_ns + int(WARM_UP_S * _NS)
@@ -341,6 +314,8 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
     return {'latencies_s': latencies, 'sent': sent, 'taken': taken,
             'outputs': None if outputs is None else int(outputs), 'received': len(arrivals),
             'rss_kb': rss, 'source_late_p99_ms': late_p99,
+            'work_p50_ms': float(np.median(work['p50'])) if work.get('p50') else None,
+            'work_p99_ms': max(work['p99']) if work.get('p99') else None,
             'cpu_fraction': (cpu_end - cpu_start) / cpu_wall if None not in (cpu_start, cpu_end)
             else float('nan')}
 
