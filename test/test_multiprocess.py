@@ -213,3 +213,52 @@ def test_malformed_calibration_file_stops_the_node_naming_it(tmp_path):
          f'calibration_files:=[{bad}, {bad}]'], capture_output=True, text=True, timeout=60)
     assert result.returncode != 0
     assert 'broken.yaml' in result.stderr and 'not valid YAML' in result.stderr
+
+
+def _descendants(pid):
+    """Return the pids of every process below ``pid`` (from /proc)."""
+    parents = {}
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / 'stat').read_text()
+            except OSError:
+                continue
+            parents.setdefault(int(stat.rpartition(')')[2].split()[1]), []).append(int(entry.name))
+    found, todo = [], [pid]
+    while todo:
+        children = parents.get(todo.pop(), [])
+        found += children
+        todo += children
+    return found
+
+
+def _running(pid):
+    try:
+        return Path(f'/proc/{pid}/stat').read_text().rpartition(')')[2].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path('/proc').is_dir(), reason='reads /proc')
+def test_a_killed_fuser_leaves_no_helper_process():
+    # The online time-offset estimate runs in a worker process (and multiprocessing's fork
+    # server and resource tracker): SIGKILL of the node must not leave them running.
+    fuser = start_script('fuser', stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60.0
+        helpers = []
+        while len(helpers) < 3 and time.monotonic() < deadline and fuser.poll() is None:
+            time.sleep(0.2)
+            helpers = _descendants(fuser.pid)
+        assert len(helpers) >= 3, f'the fuser started {len(helpers)} helper processes, not 3'
+    finally:
+        fuser.kill()
+        fuser.wait()
+    deadline = time.monotonic() + 30.0
+    while any(_running(pid) for pid in helpers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = [pid for pid in helpers if _running(pid)]
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    assert not left, f'helper processes {left} outlived the killed fuser'

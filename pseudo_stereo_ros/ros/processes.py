@@ -35,6 +35,8 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
+import time
 from typing import Iterable, List, Optional, Sequence, Set, Tuple
 
 __all__ = ['console_script', 'offset_worker', 'start_python', 'start_script', 'stop_processes']
@@ -121,13 +123,16 @@ def stop_processes(processes: Iterable[Optional[subprocess.Popen]], *,
     return outputs
 
 
-def _background_worker() -> None:
+def _background_worker(node_pid: int) -> None:
     """
     Make this worker process background work: the lowest CPU priority, no Ctrl-C.
 
     SCHED_IDLE (Linux) runs it only when its CPUs have nothing else to run, so on the node's
     core it takes idle time only (else the lowest nice value); the parent alone handles
-    Ctrl-C (a worker printed a KeyboardInterrupt traceback).
+    Ctrl-C (a worker printed a KeyboardInterrupt traceback).  A thread ends the worker
+    when the node's process is gone (killed with SIGKILL, it cannot shut the pool down).
+
+    :param node_pid: the node's process
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
@@ -137,6 +142,20 @@ def _background_worker() -> None:
             os.nice(19)
         except OSError:
             pass
+    threading.Thread(target=_exit_with, args=(node_pid,), name='node watch',
+                     daemon=True).start()
+
+
+def _exit_with(pid: int, period_s: float = 1.0) -> None:
+    """Poll process ``pid``; end this process when it is gone."""
+    while True:
+        time.sleep(period_s)
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            os._exit(0)
+        except PermissionError:
+            pass  # it exists (as another user's process)
 
 
 def offset_worker() -> ProcessPoolExecutor:
@@ -148,12 +167,12 @@ def offset_worker() -> ProcessPoolExecutor:
     by every pool of this process), never from the node's process itself,
     whose DDS threads a fork would copy in an unknown state.  It runs at the
     lowest CPU priority (SCHED_IDLE: on the node's core it takes idle time
-    only), ignores SIGINT (the node shuts it down) and ends with the node's
-    process.
+    only), ignores SIGINT (the node shuts it down) and ends within a second of
+    the node's process, also when that is killed.
 
     :return: the pool (``shutdown()`` it when done)
     """
     context = multiprocessing.get_context('forkserver')
     context.set_forkserver_preload(['pseudo_stereo_ros.timesync'])
     return ProcessPoolExecutor(max_workers=1, mp_context=context,
-                               initializer=_background_worker)
+                               initializer=_background_worker, initargs=(os.getpid(),))
