@@ -243,8 +243,10 @@ def _running(pid):
 @pytest.mark.skipif(not Path('/proc').is_dir(), reason='reads /proc')
 def test_a_killed_fuser_leaves_no_helper_process():
     # The online time-offset estimate runs in a worker process (and multiprocessing's fork
-    # server and resource tracker): SIGKILL of the node must not leave them running.
-    fuser = start_script('fuser', stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # server and resource tracker): SIGKILL of the node must not leave them running, even
+    # while the dead node is not yet reaped (a zombie), and its pipes must close.
+    fuser = start_script('fuser', ['--ros-args', '-r', f'__ns:=/killed{os.getpid()}'],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 60.0
         helpers = []
@@ -252,13 +254,16 @@ def test_a_killed_fuser_leaves_no_helper_process():
             time.sleep(0.2)
             helpers = _descendants(fuser.pid)
         assert len(helpers) >= 3, f'the fuser started {len(helpers)} helper processes, not 3'
+        os.kill(fuser.pid, signal.SIGKILL)  # not reaped: a zombie until communicate() ends
+        deadline = time.monotonic() + 30.0
+        while any(_running(pid) for pid in helpers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = [pid for pid in helpers if _running(pid)]
+        for pid in left:
+            os.kill(pid, signal.SIGKILL)
+        assert not left, f'helper processes {left} outlived the killed fuser'
+        fuser.communicate(timeout=30.0)  # the pipes closed: nothing holds them any more
     finally:
-        fuser.kill()
-        fuser.wait()
-    deadline = time.monotonic() + 30.0
-    while any(_running(pid) for pid in helpers) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    left = [pid for pid in helpers if _running(pid)]
-    for pid in left:
-        os.kill(pid, signal.SIGKILL)
-    assert not left, f'helper processes {left} outlived the killed fuser'
+        if fuser.poll() is None:
+            fuser.kill()
+            fuser.communicate()

@@ -35,7 +35,7 @@ With ``warm_up_s`` (file and virtual sources, which wait for each frame's
 time) the detector runs once on the previous frame that long before the next
 is due and its result is dropped: after a frame period of sleep the caches
 are cold and a detection costs two to three times more, so this buys about
-0.4 ms per frame with about 0.4 ms of CPU per frame.  OpenCV runs in the
+0.4 ms per frame with about 0.5 ms of CPU per frame.  OpenCV runs in the
 capture thread alone (``opencv_threads: 1``).
 """
 

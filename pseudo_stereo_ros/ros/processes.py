@@ -119,6 +119,7 @@ def stop_processes(processes: Iterable[Optional[subprocess.Popen]], *,
             outputs.append(process.communicate(timeout=timeout_s))
         except subprocess.TimeoutExpired:
             process.kill()
+            process.wait()  # reaped first: its helper processes see it gone and close the pipes
             outputs.append(process.communicate())
     return outputs
 
@@ -150,12 +151,25 @@ def _exit_with(pid: int, period_s: float = 1.0) -> None:
     """Poll process ``pid``; end this process when it is gone."""
     while True:
         time.sleep(period_s)
+        if not _alive(pid):
+            os._exit(0)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stat:
+            return stat.read().rpartition(')')[2].split()[0] not in ('Z', 'X')
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc: ask the kernel
         try:
             os.kill(pid, 0)
         except ProcessLookupError:
-            os._exit(0)
+            return False
         except PermissionError:
             pass  # it exists (as another user's process)
+        return True
 
 
 def offset_worker() -> ProcessPoolExecutor:
