@@ -256,7 +256,26 @@ def _fourcc_text(value: float) -> str:
     return ''.join(chr((code >> (8 * i)) & 0xFF) for i in range(4)).strip('\0 ')
 
 
-class DeviceSource:
+class _OpenCvSource:
+    """What the ``VideoCapture`` sources share: the open capture and the frame counter."""
+
+    _capture: _Capture | None
+    _index: int
+
+    def _frame(self, image: np.ndarray, stamp_ns: int, returned_ns: int, source: str) -> Frame:
+        """Return the next frame (numbered in delivery order)."""
+        frame = Frame(image, _encoding(image), stamp_ns, returned_ns, self._index, source)
+        self._index += 1
+        return frame
+
+    def release(self) -> None:
+        """Close the capture (it may be opened again)."""
+        if self._capture is not None:
+            self._capture.release()
+            self._capture = None
+
+
+class DeviceSource(_OpenCvSource):
     """
     A camera device through OpenCV ``VideoCapture`` (V4L2 on Linux).
 
@@ -401,18 +420,10 @@ class DeviceSource:
             raise CaptureError(f'{self.description}: no frame (read failed: camera unplugged '
                                'or stopped?)')
         stamp_ns, source = self.stamp(self._capture.get(cv2.CAP_PROP_POS_MSEC), returned_ns)
-        frame = Frame(image, _encoding(image), stamp_ns, returned_ns, self._index, source)
-        self._index += 1
-        return frame
-
-    def release(self) -> None:
-        """Close the device (it may be opened again)."""
-        if self._capture is not None:
-            self._capture.release()
-            self._capture = None
+        return self._frame(image, stamp_ns, returned_ns, source)
 
 
-class FileSource:
+class FileSource(_OpenCvSource):
     """
     A video file played with the stamps of its frames.
 
@@ -497,8 +508,7 @@ class FileSource:
         self._last_time_ns = None
         assert self._capture is not None, 'called by read() on an open file'
         if not self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0):
-            self._capture.release()
-            self._capture = None
+            self.release()
             self.start()
         return True
 
@@ -539,15 +549,7 @@ class FileSource:
             remaining = due_ns - self._system_ns()
             if remaining > 0 and wait(remaining / 1e9):
                 return None
-        frame = Frame(image, _encoding(image), stamp_ns, self._system_ns(), self._index, 'file')
-        self._index += 1
-        return frame
-
-    def release(self) -> None:
-        """Close the file."""
-        if self._capture is not None:
-            self._capture.release()
-            self._capture = None
+        return self._frame(image, stamp_ns, self._system_ns(), 'file')
 
 
 class VirtualSource:
