@@ -14,6 +14,8 @@
 
 """Tests of pseudo_stereo_ros.ros.messages: the one conversion between messages and core types."""
 
+import math
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -21,10 +23,10 @@ from hypothesis import given, strategies as st
 import numpy as np
 from pseudo_stereo_ros.records import Estimate, Observation
 from pseudo_stereo_ros.ros.messages import (
-    array_to_image, calibration_to_camera_info, diagnostic_array, diagnostic_status,
-    ENCODING_CHANNELS, EncodingError, estimate_to_point, fill_point, image_point,
-    image_to_array, ns_to_stamp, observation_to_point, point_encoder, point_to_observation,
-    point_to_xyz, stamp_to_ns, trail_marker)
+    array_to_image, calibration_to_camera_info, decode_point, diagnostic_array,
+    diagnostic_status, ENCODING_CHANNELS, EncodingError, estimate_to_point, fill_point,
+    image_point, image_to_array, ns_to_stamp, observation_to_point, point_encoder,
+    point_to_observation, point_to_xyz, stamp_to_ns, trail_marker)
 from pseudo_stereo_ros.sim.scenarios import DEFAULT_EPOCH_NS, default_rig
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -76,6 +78,27 @@ def test_encoded_point_is_what_rclpy_serializes(frame_id, stamp_ns, xyz):
     msg = deserialize_message(encoded, PointStamped)
     assert msg.header.frame_id == frame_id
     assert point_to_xyz(msg) == (stamp_ns, *xyz)
+
+
+@given(frame_id=st.text(max_size=20).filter(lambda text: '\0' not in text),
+       stamp_ns=st.integers(0, 2 ** 31 * 10 ** 9 - 1),
+       xyz=st.tuples(*[st.floats(allow_nan=False, width=64)] * 3))
+def test_decoded_point_is_what_rclpy_deserializes(frame_id, stamp_ns, xyz):
+    msg = fill_point(PointStamped(), stamp_ns, frame_id, *xyz)
+    data = serialize_message(msg)
+    assert decode_point(data) == point_to_xyz(deserialize_message(data, PointStamped))
+    assert decode_point(data) == (stamp_ns, *xyz)
+    assert decode_point(point_encoder(frame_id)(stamp_ns, *xyz)) == (stamp_ns, *xyz)
+    # Any shorter prefix is not a PointStamped: an error naming it, never a wrong point.
+    for end in range(len(data)):
+        with pytest.raises(EncodingError, match='not a serialized PointStamped'):
+            decode_point(data[:end])
+
+
+def test_decoded_point_keeps_non_finite_values_for_the_fuser_to_drop():
+    data = serialize_message(fill_point(PointStamped(), 5, 'c', math.nan, math.inf, -0.0))
+    stamp_ns, x, y, z = decode_point(data)
+    assert stamp_ns == 5 and math.isnan(x) and y == math.inf and math.copysign(1.0, z) < 0
 
 
 def test_estimate_to_point():

@@ -23,6 +23,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from pseudo_stereo_ros.calibration import CalibrationError, save_calibration
 from pseudo_stereo_ros.fusion import fuse
+from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.ros import bringup
 from pseudo_stereo_ros.ros.detector_node import DetectorNode
 from pseudo_stereo_ros.ros.fuser_node import FuserNode
@@ -40,6 +41,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import Marker
 
@@ -92,12 +94,19 @@ def _feed_points(harness, observations, received, *, burst=False):
     assert harness.spin_until(lambda: all(p.get_subscription_count() for p in
                                           publishers.values()))
     fuser = harness.nodes[0]
+
+    def taken():  # every message the fuser took: observations and malformed ones
+        return fuser.fuser.stats['observations'] + fuser.node_stats['malformed']
+
     for count, observation in enumerate(observations, 1):
-        publishers[observation.camera].publish(observation_to_point(observation))
+        if isinstance(observation, Observation):
+            publishers[observation.camera].publish(observation_to_point(observation))
+        else:  # (camera, bytes): published as they are
+            publishers[observation[0]].publish(observation[1])
         # Bursts of at most 50: half the fuser's subscription depth, whatever the scenario.
         if not burst or count % 50 == 0:
-            assert harness.spin_until(lambda: fuser.fuser.stats['observations'] >= count)
-    assert harness.spin_until(lambda: fuser.fuser.stats['observations'] >= len(observations))
+            assert harness.spin_until(lambda: taken() >= count)
+    assert harness.spin_until(lambda: taken() >= len(observations))
     harness.spin_for(0.05)  # the reorder window's last hold
 
 
@@ -393,8 +402,10 @@ def _feed_and_report(context, namespace, points, overrides=()):
     """
     Feed ``points`` to a new fuser node; return it, the positions and its last full report.
 
-    The report is the fuser's /diagnostics values once it has counted every point.
+    The report is the fuser's /diagnostics values once it has counted every point
+    (``points`` may hold ``(camera, bytes)`` items: published as they are, not points).
     """
+    count = sum(isinstance(point, Observation) for point in points)
     name = f'fuser{next(_COUNTER)}'  # /diagnostics is global: a name of this test's own
     fuser = FuserNode(context=context, namespace=namespace, node_name=name, parameter_overrides=[
         Parameter('diagnostics_period_s', value=0.05), *overrides])
@@ -406,10 +417,10 @@ def _feed_and_report(context, namespace, points, overrides=()):
         received = _positions_subscription(harness)
         _feed_points(harness, points, received)
         assert harness.spin_until(lambda: any(
-            r and r[1]['observations'] == len(points) for r in reports))
+            r and r[1]['observations'] == count for r in reports))
     finally:
         harness.close()
-    _, values = next(r for r in reports if r and r[1]['observations'] == len(points))
+    _, values = next(r for r in reports if r and r[1]['observations'] == count)
     return fuser, received, values
 
 
@@ -510,6 +521,23 @@ def test_fuser_node_drops_one_bad_stamp_without_a_new_session(context, namespace
     assert fuser.fuser.gate.image_margin == 0.2
     assert fuser.fuser.plausibility.max_speed_mps == 30.0
     assert fuser.fuser.plausibility.workspace_max_m == (5.0, 5.0, 4.0)
+
+
+def test_fuser_node_drops_malformed_messages_and_counts_them(context, namespace):
+    # The fuser takes its points as raw bytes (messages.decode_point): bytes that are not a
+    # PointStamped are dropped and counted, the node keeps fusing the others.
+    cameras, _, observations = _observations()
+    good = serialize_message(observation_to_point(observations[0]))
+    garbage = [b'\0\1\0\0' + b'x' * 5, b'\xff' * 60, good[:30]]
+    k = len(observations) // 2
+    points = observations[:k] + [('camera1', data) for data in garbage] + observations[k:]
+    fuser, received, values = _feed_and_report(context, namespace, points)
+    expected, _ = fuse(cameras, observations)
+    assert [r[0] for r in received] == [e.stamp_ns for e in expected]
+    np.testing.assert_allclose([r[1:] for r in received], [(e.x, e.y, e.z) for e in expected],
+                               rtol=0, atol=1e-9)
+    assert fuser.node_stats['malformed'] == values['dropped: malformed message'] == 3
+    assert values['estimates'] + _drops(values) - 3 == len(observations)
 
 
 def test_bringup_real_refuses_the_simulated_calibration(capsys, tmp_path):

@@ -45,7 +45,6 @@ resident memory of the target after 10% of the run and at its end.
 """
 
 import os
-import struct
 import subprocess
 import sys
 import time
@@ -58,7 +57,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile
 
-from .messages import observation_to_point
+from .messages import decode_point, observation_to_point
 from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
 from .processes import start_python, start_script, stop_processes
 from ..records import Observation
@@ -186,8 +185,9 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
     node = rclpy.create_node('bench_relay', namespace=namespace)
     publisher = node.create_publisher(PointStamped, 'ball/position', 10)
     for name in names:
+        # Raw bytes in and out: the barest relay (the fuser takes its points raw too).
         node.create_subscription(PointStamped, f'{name}/ball/image_point', publisher.publish,
-                                 100)
+                                 100, raw=True)
     try:
         spin([node], executor=executor)
     finally:
@@ -196,12 +196,6 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
 
 
 # -- the sink and the run -------------------------------------------------------------------------
-
-def _stamp_ns(data: bytes) -> int:
-    """Return the header stamp of a serialized PointStamped (CDR: 4-byte header, sec, nanosec)."""
-    sec, nanosec = struct.unpack_from('<iI', data, 4)
-    return sec * _NS + nanosec
-
 
 def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_RATE_HZ,
                executor: str = DEFAULT_EXECUTOR, report_every_s: Optional[float] = None,
@@ -249,7 +243,7 @@ def bench_load(seconds: float, *, target: str = 'fuser', rate_hz: float = LOAD_R
         node = rclpy.create_node('bench_load_sink', namespace=namespace, context=context)
         node.create_subscription(
             PointStamped, 'ball/position',
-            lambda data: arrivals.append((_stamp_ns(data), time.time_ns())),
+            lambda data: arrivals.append((decode_point(data)[0], time.time_ns())),
             QoSProfile(history=HistoryPolicy.KEEP_ALL), raw=True)
 
         def on_diagnostics(msg):

@@ -61,7 +61,6 @@ import copy
 import os
 from pathlib import Path
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
@@ -80,7 +79,8 @@ from sensor_msgs.msg import Image
 
 from .bench_load import bench_load, LOAD_RATE_HZ, rss_growth, TARGET_P99_MS
 from .fuser_node import FuserNode
-from .messages import array_to_image, ns_to_stamp, observation_to_point, stamp_to_ns
+from .messages import (array_to_image, decode_point, ns_to_stamp, observation_to_point,
+                       stamp_to_ns)
 from .node_tools import close, DEFAULT_EXECUTOR, EXECUTORS, make_executor, spin
 from .processes import start_python, start_script, stop_processes
 from ..detection import BallDetector
@@ -88,7 +88,6 @@ from ..rig import config_dir
 from ..sim.rendering import BallRenderer
 from ..sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe, shutter_stamps,
                              truth_at)
-from ..stamps import sec_nanosec_to_ns
 
 __all__ = ['bench_camera_detectors', 'hop_probe_main', 'main', 'print_camera_detector_rows',
            'transport_probe_main']
@@ -500,7 +499,7 @@ def bench_camera_detectors(seconds: float) -> dict:
 
         def timed_callback(callback, topic):
             def wrapper(msg):
-                arrivals['points'].append((stamp_to_ns(msg.header.stamp), time.time_ns()))
+                arrivals['points'].append((decode_point(msg)[0], time.time_ns()))
                 heard.add(topic)
                 return callback(msg)
             return wrapper
@@ -509,10 +508,9 @@ def bench_camera_detectors(seconds: float) -> dict:
             def wrapper(msg):
                 publish(msg)
                 published_ns = time.time_ns()
-                # The fuser publishes serialized points (messages.point_encoder): the stamp is
-                # the int32 sec and uint32 nanosec after the 4-byte encapsulation header.
-                stamp_ns = (sec_nanosec_to_ns(*struct.unpack_from('<iI', msg, 4))
-                            if isinstance(msg, bytes) else stamp_to_ns(msg.header.stamp))
+                # The fuser publishes serialized points (messages.point_encoder).
+                stamp_ns = (decode_point(msg)[0] if isinstance(msg, bytes)
+                            else stamp_to_ns(msg.header.stamp))
                 arrivals['positions'].append((stamp_ns, published_ns))
             return wrapper
 
