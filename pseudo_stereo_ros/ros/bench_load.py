@@ -57,6 +57,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import HistoryPolicy, QoSProfile
 
+from .fuser_node import INPUT_QUEUE_DEPTH
 from .messages import decode_point, observation_to_point
 from .node_tools import close, DEFAULT_EXECUTOR, make_executor, spin
 from .processes import start_python, start_script, stop_processes
@@ -174,7 +175,7 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
     Run the bare relay: image points in, the same messages out on ``ball/position``.
 
     Arguments: namespace, executor kind, then the camera names.  Same QoS
-    as the fuser (subscriptions depth 100, publisher depth 10); runs until
+    as the fuser (subscriptions ``INPUT_QUEUE_DEPTH`` deep, publisher depth 10); runs until
     SIGINT.
 
     :param argv: the arguments; None for ``sys.argv[1:]``
@@ -187,7 +188,7 @@ def relay_main(argv: Optional[List[str]] = None) -> int:
     for name in names:
         # Raw bytes in and out: the barest relay (the fuser takes its points raw too).
         node.create_subscription(PointStamped, f'{name}/ball/image_point', publisher.publish,
-                                 100, raw=True)
+                                 INPUT_QUEUE_DEPTH, raw=True)
     try:
         spin([node], executor=executor)
     finally:

@@ -70,7 +70,11 @@ from ..stamps import seconds_to_ns
 from ..timesync import OnlineOffsetEstimator, run_offset_job
 from ..trajectory import DEFAULT_MAX_WINDOW_S
 
-__all__ = ['FuserNode', 'main']
+__all__ = ['FuserNode', 'INPUT_QUEUE_DEPTH', 'main']
+
+#: Default depth of the image point subscriptions: half a second at 2 x 1,000 Hz (100 lost
+#: points whenever the node's core was taken for more than 50 ms at that rate).
+INPUT_QUEUE_DEPTH = 1000
 
 
 def _seconds_to_ns(name: str, value: float) -> int:
@@ -145,6 +149,10 @@ class FuserNode(Node):
         offset_period_s = declare(self, 'time_offset_update_period_s', 1.0,
                                   'period of the online time-offset estimate [s]; 0 disables',
                                   min_value=0.0, read_only=True)
+        depth = declare(self, 'qos_depth', INPUT_QUEUE_DEPTH,
+                        'queue of each image point subscription (keep last): points that '
+                        'arrive while the node is starved of CPU wait here', min_value=1,
+                        read_only=True)
         self.max_slew = declare(self, 'time_offset_max_slew', 0.005,
                                 'fastest change of an applied offset [s per s of stamps]',
                                 min_value=0.0, max_value=0.5, read_only=True)
@@ -224,7 +232,7 @@ class FuserNode(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._subscriptions = [
             self.create_subscription(PointStamped, f'{name}/ball/image_point',
-                                     functools.partial(self._on_point, name), 100, raw=True)
+                                     functools.partial(self._on_point, name), depth, raw=True)
             for name in names]
         self._flush_timer = None
         if self.buffer.window_ns > 0 or self.apply_estimates:
