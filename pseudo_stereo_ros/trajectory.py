@@ -155,8 +155,9 @@ __all__ = [
 
 #: Longest window considered [s].
 DEFAULT_MAX_WINDOW_S = 1.0
-#: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.007).
-DEFAULT_CONSISTENCY = 12.0
+#: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.05),
+#: among constant-acceleration fits (used where the path curves at the longest window's scale).
+DEFAULT_CONSISTENCY = 8.0
 #: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
 DEFAULT_GATE = 60.0
 #: Floor of the measured detection noise [px].
@@ -201,6 +202,9 @@ _FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
 _ORDER_CONSISTENCY = 12.0
+# Lepski's bound (chi-square, 3 d.o.f., p ~ 0.001) among the windows' lower-order fits: the
+# longest window accepted that model, so a disagreement is more likely noise than bias.
+_LOWER_CONSISTENCY = 16.0
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
@@ -536,7 +540,13 @@ class TrajectoryFuser(GatedEstimator):
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
-            self._pending = None  # the path is corrected by this detection, not judged
+            # The path is corrected by this detection, not judged; but if another camera's
+            # detection is pending, the two may show an impact while this camera was silent.
+            if self._pending is not None and self._break_range is None and \
+                    stamp - self._pending[0] <= self.gate.rig_gap_ns and \
+                    self._confirm_break(frame):
+                return self._estimate(stamp, index)
+            self._pending = None
         else:
             verdict = self._check(frame, prediction, equations)
             if verdict == 'pending':
@@ -1028,18 +1038,29 @@ class TrajectoryFuser(GatedEstimator):
             return None
         kept_sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
-        chosen = self._lepski(points, covariances, sigma2)
-        beta, inverse = self._full(*solutions[chosen])
-        point, covariance = points[chosen], covariances[chosen]
-        if quadratic and chosen == len(kept_sizes) - 1 and \
-                kept_sizes[chosen] >= _CV_SELECT_MIN:
-            # The model's order: the chosen window's constant velocity or free fall where
-            # its acceleration does not differ significantly from theirs.
-            lower = self._lower_order(beta, inverse, position, sigma2)
-            if lower is not None:
-                point, beta, inverse = lower
-                selector = position[:, :len(beta)]
-                covariance = (selector @ inverse @ selector.T).tolist()
+        longest = len(kept_sizes) - 1
+        model = None
+        if quadratic and kept_sizes[longest] >= _CV_SELECT_MIN:
+            # The model's order, from the longest window: a constant velocity or a free fall
+            # where its acceleration does not differ significantly from theirs.
+            model = self._lower_model(*self._full(*solutions[longest]), sigma2)
+        if model is None:
+            chosen = self._lepski(points, covariances, sigma2, self.consistency)
+            beta, inverse = self._full(*solutions[chosen])
+            point, covariance = points[chosen], covariances[chosen]
+        else:
+            # The window among that model's fits (its variance is far smaller than a
+            # parabola's at a short window's end, so a noisy short fit stops the rule less
+            # often and costs less when it does).
+            lowers = [self._lower_order(*self._full(*solution), position, model)
+                      for solution in (solutions[k] for k in range(longest + 1))]
+            selectors = [position[:, :len(lower[1])] for lower in lowers]
+            lower_covariances = [(selector @ lower[2] @ selector.T).tolist()
+                                 for selector, lower in zip(selectors, lowers)]
+            chosen = self._lepski([lower[0] for lower in lowers], lower_covariances, sigma2,
+                                  _LOWER_CONSISTENCY)
+            point, beta, inverse = lowers[chosen]
+            covariance = lower_covariances[chosen]
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -1064,39 +1085,56 @@ class TrajectoryFuser(GatedEstimator):
                     rows, rhs, weight, points[reference], covariances[reference]))
         return point
 
-    def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
-                     sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    @staticmethod
+    def _lower_model(beta: np.ndarray, inverse: np.ndarray, sigma2: float) -> int | None:
         """
-        Return a window's lower-order fit, if its acceleration fit does not reject it.
+        Return the lower-order model a window's acceleration fit does not reject, or None.
 
-        The candidates fix the acceleration: zero (a constant velocity) or the known
-        gravity :data:`GRAVITY_MPS2` along -z (a free fall).  Each is the acceleration
-        fit under a linear constraint, so its coefficients, their covariance and the
-        test (Wald's chi-square, 3 d.o.f., of the fitted acceleration against the fixed
-        one) follow from the acceleration fit's solution alone.  The candidate with the
-        smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
-        jump at an impact stays free.
+        The candidates fix the acceleration: zero (0, a constant velocity) or the known
+        gravity :data:`GRAVITY_MPS2` along -z (1, a free fall).  The test is Wald's
+        chi-square (3 d.o.f.) of the fitted acceleration against the fixed one; the
+        candidate with the smaller statistic is taken if that is within
+        ``_ORDER_CONSISTENCY``.
+
+        :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
+        :param inverse: (m, m) their covariance per px^2
+        :param sigma2: the detection noise's variance [px^2]
+        :return: the model's column in ``_FIXED_ACCELERATIONS``, or None
+        """
+        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
+        try:
+            solved = np.linalg.solve(inverse[np.ix_(_ACCELERATION, _ACCELERATION)], offsets)
+        except np.linalg.LinAlgError:
+            return None
+        statistics = (offsets * solved).sum(axis=0) / sigma2
+        best = int(np.argmin(statistics))
+        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
+            return None
+        return best
+
+    @staticmethod
+    def _lower_order(beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
+                     model: int) -> tuple[list, np.ndarray, np.ndarray]:
+        """
+        Return a window's fit with its acceleration fixed (a lower-order model).
+
+        The fit is the acceleration fit under a linear constraint, so its coefficients and
+        their covariance follow from the acceleration fit's solution alone; a velocity jump
+        at an impact stays free.
 
         :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
         :param inverse: (m, m) their covariance per px^2
         :param position: (3, 12) map from the coefficients to the position at the event
-        :param sigma2: the detection noise's variance [px^2]
-        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit, or None
+        :param model: the column of ``_FIXED_ACCELERATIONS`` (:meth:`_lower_model`)
+        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit
         """
-        gain = inverse[:, _ACCELERATION]  # (12, 3)
-        block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
-        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
-        try:
-            solved = np.linalg.solve(block, np.concatenate((offsets, gain.T), axis=1))
-        except np.linalg.LinAlgError:
-            return None
-        statistics = (offsets * solved[:, :2]).sum(axis=0) / sigma2
-        best = int(np.argmin(statistics))
-        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
-            return None
-        lower_beta = beta - gain @ solved[:, best]
-        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
-        lower_inverse = inverse - gain @ solved[:, 2:]
+        gain = inverse[:, _ACCELERATION]  # (m, 3)
+        offset = beta[_ACCELERATION] - _FIXED_ACCELERATIONS[:, model]
+        solved = np.linalg.solve(gain[_ACCELERATION],
+                                 np.concatenate((offset[:, None], gain.T), axis=1))
+        lower_beta = beta - gain @ solved[:, 0]
+        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, model]
+        lower_inverse = inverse - gain @ solved[:, 1:]
         return (position[:, :len(beta)] @ lower_beta).tolist(), lower_beta, lower_inverse
 
     def _window_system(self, stamp: int, first: int,
@@ -1229,13 +1267,15 @@ class TrajectoryFuser(GatedEstimator):
         full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
 
-    def _lepski(self, points: list, covariances: list, sigma2: float) -> int:
+    @staticmethod
+    def _lepski(points: list, covariances: list, sigma2: float, consistency: float) -> int:
         """
         Return the index of the longest window consistent with every shorter one.
 
         :param points: the windows' positions (3 floats each), shortest window first
         :param covariances: their covariances per px^2 (3 x 3 nested lists)
         :param sigma2: the detection noise's variance [px^2]
+        :param consistency: the chi-square bound (3 d.o.f.) of two windows' disagreement
         """
         count = len(points)
         if count == 1:
@@ -1246,7 +1286,6 @@ class TrajectoryFuser(GatedEstimator):
         # the search at k - 1.
         first = covariances[0]
         ridge = 1e-12 * sigma2 * (first[0][0] + first[1][1] + first[2][2])
-        consistency = self.consistency
         for k in range(1, count):
             xk, yk, zk = points[k]
             (l00, l01, l02), (_, l11, l12), (_, _, l22) = covariances[k]

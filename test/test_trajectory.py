@@ -133,10 +133,6 @@ def test_sweep_every_case_covered_better_than_paper_and_bounded(sweep):
         assert result.ratio < 1.0, (label, result.ratio)
 
 
-@pytest.mark.xfail(strict=True, reason='issue 11 bar not reached: measured geometric mean '
-                   '0.43x paper and worst case 0.97x (0.3 px noise, 30 fps spiral) on this '
-                   'sweep (the full 144 cases: 0.39x, worst 1.05x); see README, "Beyond the '
-                   'paper: the trajectory method"')
 def test_sweep_meets_the_issue_ratio_bars(sweep):
     summary = summarize(sweep)
     assert summary['geometric_mean_ratio'] <= 0.4
