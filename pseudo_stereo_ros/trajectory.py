@@ -179,9 +179,9 @@ DROP_REASONS = {
 
 # Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
 _SCALE_NS = 100_000_000
-# Window sizes [frames], nested, newest first; the largest bounds the work per event.
+# Window sizes [frames] of two cameras, nested, newest first; the largest bounds the work
+# per event.  A rig of C cameras uses C / 2 times as many frames (the same time spans).
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
-_SHORTEST, _LONGEST = int(_WINDOWS[0]), int(_WINDOWS[-1])
 # Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
 # rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
 _AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
@@ -266,18 +266,19 @@ class _Solutions:
 # Solved windows: (sizes, points (3 floats each), covariances (3 x 3 nested lists), solutions).
 _Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
-_SIZES: dict[int, np.ndarray] = {}
+_SIZES: dict[tuple[int, int], np.ndarray] = {}
 # The map from the coefficients to the position at the reference time (no impact before it).
 _POSITION = np.zeros((3, 12))
 _POSITION[(0, 1, 2), (0, 3, 6)] = 1.0
 _POSITION.flags.writeable = False
 
 
-def _sizes(count: int) -> np.ndarray:
+def _sizes(count: int, windows: np.ndarray) -> np.ndarray:
     """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
-    sizes = _SIZES.get(count)
+    key = (count, int(windows[-1]))
+    sizes = _SIZES.get(key)
     if sizes is None:
-        sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
+        sizes = _SIZES[key] = np.append(windows[windows < count], count)
     return sizes
 
 
@@ -396,6 +397,9 @@ class TrajectoryFuser(GatedEstimator):
         self.order = int(order)
         self.pending_estimate = pending_estimate
         self._names = names
+        # Window sizes [frames]: each camera contributes as many frames as in a pair's windows
+        # (more cameras must not shorten the windows' time spans).
+        self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -584,7 +588,7 @@ class TrajectoryFuser(GatedEstimator):
         self._rhs[position] = rhs
         self._weight[position] = weight
         self._end = end = end + 1
-        start = max(self._start, end - _LONGEST)
+        start = max(self._start, end - int(self._windows[-1]))
         newest = int(self._stamp[end - 1])
         oldest = newest - self.max_window_ns
         stamps = self._stamp
@@ -993,8 +997,8 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= _SHORTEST
-        sizes = _sizes(count) if quadratic else np.array((count,))
+        quadratic = self.order == 2 and count >= self._windows[0]
+        sizes = _sizes(count, self._windows) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
@@ -1034,7 +1038,7 @@ class TrajectoryFuser(GatedEstimator):
             kept = self._fits(system[0][:, _CV][:, :, _CV], system[1][:, _CV],
                               np.array((after,)), _CV, position, index)
         if kept is None:
-            self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
+            self.stats['warming_up' if count < self._windows[0] else 'degenerate'] += 1
             return None
         kept_sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
