@@ -1056,15 +1056,21 @@ class TrajectoryFuser(GatedEstimator):
             # The window among that model's fits (its variance is far smaller than a
             # parabola's at a short window's end, so a noisy short fit stops the rule less
             # often and costs less when it does).
-            lowers = [self._lower_order(*self._full(*solution), position, model)
-                      for solution in (solutions[k] for k in range(longest + 1))]
-            selectors = [position[:, :len(lower[1])] for lower in lowers]
-            lower_covariances = [(selector @ lower[2] @ selector.T).tolist()
-                                 for selector, lower in zip(selectors, lowers)]
-            chosen = self._lepski([lower[0] for lower in lowers], lower_covariances, sigma2,
-                                  _LOWER_CONSISTENCY)
-            point, beta, inverse = lowers[chosen]
-            covariance = lower_covariances[chosen]
+            if isinstance(solutions, _Solutions):  # one stack: all windows at once
+                stacks = [(solutions.betas, solutions.inverses)]
+            else:  # windows with and without an impact's jump (9 or 12 unknowns)
+                stacks = [tuple(part[None] for part in self._full(*solutions[k]))
+                          for k in range(longest + 1)]
+            points, covariances, lowers = [], [], []
+            for betas, inverses in stacks:
+                betas, inverses = self._lower_order(betas, inverses, model)
+                selector = position[:, :betas.shape[1]]
+                points += (betas @ selector.T).tolist()
+                covariances += (selector @ inverses @ selector.T).tolist()
+                lowers += zip(betas, inverses)
+            chosen = self._lepski(points, covariances, sigma2, _LOWER_CONSISTENCY)
+            beta, inverse = lowers[chosen]
+            point, covariance = points[chosen], covariances[chosen]
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -1117,29 +1123,27 @@ class TrajectoryFuser(GatedEstimator):
         return best
 
     @staticmethod
-    def _lower_order(beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
-                     model: int) -> tuple[list, np.ndarray, np.ndarray]:
+    def _lower_order(betas: np.ndarray, inverses: np.ndarray,
+                     model: int) -> tuple[np.ndarray, np.ndarray]:
         """
-        Return a window's fit with its acceleration fixed (a lower-order model).
+        Return windows' fits with their acceleration fixed (a lower-order model).
 
-        The fit is the acceleration fit under a linear constraint, so its coefficients and
+        Each is the acceleration fit under a linear constraint, so its coefficients and
         their covariance follow from the acceleration fit's solution alone; a velocity jump
         at an impact stays free.
 
-        :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
-        :param inverse: (m, m) their covariance per px^2
-        :param position: (3, 12) map from the coefficients to the position at the event
+        :param betas: (K, m) the acceleration fits' coefficients at the event (m = 9 or 12)
+        :param inverses: (K, m, m) their covariances per px^2
         :param model: the column of ``_FIXED_ACCELERATIONS`` (:meth:`_lower_model`)
-        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit
+        :return: the lower-order fits' coefficients (K, m) and covariances (K, m, m)
         """
-        gain = inverse[:, _ACCELERATION]  # (m, 3)
-        offset = beta[_ACCELERATION] - _FIXED_ACCELERATIONS[:, model]
-        solved = np.linalg.solve(gain[_ACCELERATION],
-                                 np.concatenate((offset[:, None], gain.T), axis=1))
-        lower_beta = beta - gain @ solved[:, 0]
-        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, model]
-        lower_inverse = inverse - gain @ solved[:, 1:]
-        return (position[:, :len(beta)] @ lower_beta).tolist(), lower_beta, lower_inverse
+        gains = inverses[:, :, _ACCELERATION]  # (K, m, 3)
+        offsets = betas[:, _ACCELERATION] - _FIXED_ACCELERATIONS[:, model]  # (K, 3)
+        solved = np.linalg.solve(gains[:, _ACCELERATION], np.concatenate(
+            (offsets[:, :, None], gains.transpose(0, 2, 1)), axis=2))  # (K, 3, 1 + m)
+        lower_betas = betas - np.matmul(gains, solved[:, :, :1])[:, :, 0]
+        lower_betas[:, _ACCELERATION] = _FIXED_ACCELERATIONS[:, model]
+        return lower_betas, inverses - np.matmul(gains, solved[:, :, 1:])
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
