@@ -198,6 +198,7 @@ GRAVITY_MPS2 = 9.8
 _ACCELERATION = np.array((2, 5, 8))
 _FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
                                  (0.0, -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2)))
+_FIXED_LIST = _FIXED_ACCELERATIONS.T.tolist()  # per model: (x, y, z)
 # Fewest frames of a window whose velocity fit may replace the acceleration fit.
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
@@ -1111,15 +1112,14 @@ class TrajectoryFuser(GatedEstimator):
         :param sigma2: the detection noise's variance [px^2]
         :return: the model's column in ``_FIXED_ACCELERATIONS``, or None
         """
-        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
-        try:
-            solved = np.linalg.solve(inverse[np.ix_(_ACCELERATION, _ACCELERATION)], offsets)
-        except np.linalg.LinAlgError:
-            return None
-        statistics = (offsets * solved).sum(axis=0) / sigma2
-        best = int(np.argmin(statistics))
-        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
-            return None
+        # (Plain floats: a 3 x 3 form per candidate, the cost of every event.)
+        (a, b, c), (_, e, f), (_, _, i) = inverse[2:9:3, 2:9:3].tolist()
+        x, y, z = beta[2:9:3].tolist()
+        statistics = [_inverse_form(x - fixed_x, y - fixed_y, z - fixed_z, a, b, c, e, f, i)
+                      for fixed_x, fixed_y, fixed_z in _FIXED_LIST]
+        best = 0 if statistics[0] <= statistics[1] else 1
+        if not 0.0 < statistics[best] <= _ORDER_CONSISTENCY * sigma2:
+            return None  # (zero: a singular covariance)
         return best
 
     @staticmethod
