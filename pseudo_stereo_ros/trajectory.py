@@ -36,10 +36,12 @@ event's stamp by a linear change of the time origin: one frame's work per
 event, whatever the window.
 
 **Window.**  Fits over nested windows of the newest 6, 9, 13, 19, 28, 40
-and 60 frames (at most ``max_window_s``) are solved together.  The window is
+and 60 frames of a pair (a rig of C cameras: C / 2 times as many, so that
+more cameras do not shorten the windows' time spans; at most
+``max_window_s``) are solved together.  The window is
 chosen at each event by Lepski's rule: the longest window whose estimate
-agrees with that of every shorter one within ``consistency`` (a chi-square
-bound; for nested fits the difference has the difference of their
+agrees with that of every shorter one within a chi-square bound (below;
+for nested fits the difference has the difference of their
 covariances).  Longer windows average more noise until the model's bias (a
 curve a parabola cannot follow, a missed impact) shows as disagreement, so
 the window follows the frame rate, the noise and the motion by itself: long
@@ -52,16 +54,21 @@ nearly the same at consecutive frames and cancels; the noise does not),
 averaged in the log domain so that rare large samples do not inflate it, and
 never below ``min_sigma_px``.
 
-**Model order.**  Where the rule keeps the longest window (at least 13
-frames: the path is smooth at that scale), two lower-order fits of that
-window compete with its constant acceleration: a constant velocity and a free
-fall (gravity :data:`GRAVITY_MPS2` along -z, known); both have the variance of
-a velocity fit, much smaller than a parabola's at the window's end.  Each is
-the acceleration fit under a linear constraint (its acceleration fixed), so it
+**Model order, then window.**  On the longest window (at least 13 frames:
+the path is smooth at that scale), two lower-order fits compete with its
+constant acceleration: a constant velocity and a free fall (gravity
+:data:`GRAVITY_MPS2` along -z, known); both have the variance of a velocity
+fit, much smaller than a parabola's at the window's end.  Each is the
+acceleration fit under a linear constraint (its acceleration fixed), so it
 follows from that fit's solution; the one whose fixed acceleration the fitted
-one differs from less (Wald's chi-square) is used if that is within 12.  A
+one differs from less (Wald's chi-square) is taken if that is within 12.  A
 straight line keeps the velocity fit, a ball in flight the free fall, a curve
-the acceleration fit.
+the acceleration fit.  Lepski's rule then runs among that model's fits of the
+windows: with a lower-order model with the bound ``_LOWER_CONSISTENCY`` (the
+longest window accepted the model: a disagreement is more likely noise, and a
+noisy short velocity fit costs little), among acceleration fits with
+``consistency`` (they run only where the path curves at the longest window's
+scale, so a long window's bias is caught early).
 
 **A flight's first frames.**  Until the window holds six frames (a flight's
 start, or a restart after the path was lost) the paper's method
@@ -95,7 +102,8 @@ the lost path's estimates no longer bound the plausible speed (a new ball
 served before the rig paused).  A camera's first detection after a silence
 longer than its max gap is fitted without gating: meanwhile the path drifted
 along the other cameras' rays, where they cannot see, and they would judge the
-returning camera's detections stray.
+returning camera's detections stray; unless another camera's detection is
+pending and the two confirm an impact (a camera silent across a bounce).
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
@@ -350,6 +358,7 @@ class TrajectoryFuser(GatedEstimator):
     :param workspace_max_m: see :class:`pseudo_stereo_ros.fusion.Fuser` [m]
     :param max_window_s: longest window of the fit [s]
     :param consistency: Lepski's chi-square bound (3 d.o.f.) between windows' estimates
+        among constant-acceleration fits
     :param innovation_gate: chi-square bound (2 d.o.f.) beyond which a detection is pending
     :param min_sigma_px: floor of the measured detection noise [px]
     :param max_uncertainty: largest estimate standard deviation in pixels of the newest
@@ -527,7 +536,8 @@ class TrajectoryFuser(GatedEstimator):
         A ``late`` detection, or a ``fresh`` one (its camera was silent for longer than
         its max gap), is fitted without gating: while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
-        the returning camera's detections stray.
+        the returning camera's detections stray; unless another camera's detection is
+pending and the two confirm an impact (a camera silent across a bounce).
         """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
         r0, r1, r2 = self._rotated_center[index]

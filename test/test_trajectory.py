@@ -20,8 +20,8 @@ geometric mean over varied cases and below 0.95x in each, coverage >= 90% of the
 events, no estimate over 0.5 m off; Table 1's columns at most 0.5x; the error right after an
 impact below ``paper``'s; three cameras better than any pair; on the real table-tennis data
 median and p90 within 1.1x the interpolation oracle's) or from the model itself (a polynomial
-path is fitted exactly when the motion is one).  Bars the method does not reach yet are
-``xfail(strict=True)`` with the measured figures: they fail the suite the day they pass.
+path is fitted exactly when the motion is one).  The 60 fps three-camera rows are not held
+(two of six favour a pair; README, "Three cameras").
 """
 
 import itertools
