@@ -537,7 +537,7 @@ class TrajectoryFuser(GatedEstimator):
         its max gap), is fitted without gating: while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
         the returning camera's detections stray; unless another camera's detection is
-pending and the two confirm an impact (a camera silent across a bounce).
+        pending and the two confirm an impact (a camera silent across a bounce).
         """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
         r0, r1, r2 = self._rotated_center[index]
