@@ -1070,9 +1070,12 @@ class TrajectoryFuser(GatedEstimator):
             if isinstance(solutions, _Solutions):  # one stack: all windows at once
                 stacks = [(solutions.betas, solutions.inverses)]
             else:  # windows with and without an impact's jump (9 or 12 unknowns)
-                stacks = [tuple(part[None] for part in self._full(*solutions[k]))
-                          for k in range(longest + 1)]
-            points, covariances, lowers = [], [], []
+                stacks = []
+                for k in range(longest + 1):
+                    full_beta, full_inverse = self._full(*solutions[k])
+                    stacks.append((full_beta[None], full_inverse[None]))
+            lowers: list[tuple[np.ndarray, np.ndarray]] = []
+            points, covariances = [], []
             for betas, inverses in stacks:
                 betas, inverses = self._lower_order(betas, inverses, model)
                 selector = position[:, :betas.shape[1]]
