@@ -36,10 +36,12 @@ event's stamp by a linear change of the time origin: one frame's work per
 event, whatever the window.
 
 **Window.**  Fits over nested windows of the newest 6, 9, 13, 19, 28, 40
-and 60 frames (at most ``max_window_s``) are solved together.  The window is
+and 60 frames of a pair (a rig of C cameras: C / 2 times as many, so that
+more cameras do not shorten the windows' time spans; at most
+``max_window_s``) are solved together.  The window is
 chosen at each event by Lepski's rule: the longest window whose estimate
-agrees with that of every shorter one within ``consistency`` (a chi-square
-bound; for nested fits the difference has the difference of their
+agrees with that of every shorter one within a chi-square bound (below;
+for nested fits the difference has the difference of their
 covariances).  Longer windows average more noise until the model's bias (a
 curve a parabola cannot follow, a missed impact) shows as disagreement, so
 the window follows the frame rate, the noise and the motion by itself: long
@@ -52,16 +54,21 @@ nearly the same at consecutive frames and cancels; the noise does not),
 averaged in the log domain so that rare large samples do not inflate it, and
 never below ``min_sigma_px``.
 
-**Model order.**  Where the rule keeps the longest window (at least 13
-frames: the path is smooth at that scale), two lower-order fits of that
-window compete with its constant acceleration: a constant velocity and a free
-fall (gravity :data:`GRAVITY_MPS2` along -z, known); both have the variance of
-a velocity fit, much smaller than a parabola's at the window's end.  Each is
-the acceleration fit under a linear constraint (its acceleration fixed), so it
+**Model order, then window.**  On the longest window (at least 13 frames:
+the path is smooth at that scale), two lower-order fits compete with its
+constant acceleration: a constant velocity and a free fall (gravity
+:data:`GRAVITY_MPS2` along -z, known); both have the variance of a velocity
+fit, much smaller than a parabola's at the window's end.  Each is the
+acceleration fit under a linear constraint (its acceleration fixed), so it
 follows from that fit's solution; the one whose fixed acceleration the fitted
-one differs from less (Wald's chi-square) is used if that is within 12.  A
+one differs from less (Wald's chi-square) is taken if that is within 12.  A
 straight line keeps the velocity fit, a ball in flight the free fall, a curve
-the acceleration fit.
+the acceleration fit.  Lepski's rule then runs among that model's fits of the
+windows: with a lower-order model with the bound ``_LOWER_CONSISTENCY`` (the
+longest window accepted the model: a disagreement is more likely noise, and a
+noisy short velocity fit costs little), among acceleration fits with
+``consistency`` (they run only where the path curves at the longest window's
+scale, so a long window's bias is caught early).
 
 **A flight's first frames.**  Until the window holds six frames (a flight's
 start, or a restart after the path was lost) the paper's method
@@ -95,7 +102,8 @@ the lost path's estimates no longer bound the plausible speed (a new ball
 served before the rig paused).  A camera's first detection after a silence
 longer than its max gap is fitted without gating: meanwhile the path drifted
 along the other cameras' rays, where they cannot see, and they would judge the
-returning camera's detections stray.
+returning camera's detections stray; unless another camera's detection is
+pending and the two confirm an impact (a camera silent across a bounce).
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
@@ -155,8 +163,9 @@ __all__ = [
 
 #: Longest window considered [s].
 DEFAULT_MAX_WINDOW_S = 1.0
-#: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.007).
-DEFAULT_CONSISTENCY = 12.0
+#: Lepski's bound: chi-square (3 degrees of freedom) of two windows' disagreement (p ~ 0.05),
+#: among constant-acceleration fits (used where the path curves at the longest window's scale).
+DEFAULT_CONSISTENCY = 8.0
 #: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
 DEFAULT_GATE = 60.0
 #: Floor of the measured detection noise [px].
@@ -178,9 +187,9 @@ DROP_REASONS = {
 
 # Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
 _SCALE_NS = 100_000_000
-# Window sizes [frames], nested, newest first; the largest bounds the work per event.
+# Window sizes [frames] of two cameras, nested, newest first; the largest bounds the work
+# per event.  A rig of C cameras uses C / 2 times as many frames (the same time spans).
 _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
-_SHORTEST, _LONGEST = int(_WINDOWS[0]), int(_WINDOWS[-1])
 # Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
 # rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
 _AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
@@ -197,10 +206,14 @@ GRAVITY_MPS2 = 9.8
 _ACCELERATION = np.array((2, 5, 8))
 _FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
                                  (0.0, -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2)))
+_FIXED_LIST = _FIXED_ACCELERATIONS.T.tolist()  # per model: (x, y, z)
 # Fewest frames of a window whose velocity fit may replace the acceleration fit.
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
 _ORDER_CONSISTENCY = 12.0
+# Lepski's bound (chi-square, 3 d.o.f., p ~ 0.001) among the windows' lower-order fits: the
+# longest window accepted that model, so a disagreement is more likely noise than bias.
+_LOWER_CONSISTENCY = 16.0
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
@@ -262,18 +275,19 @@ class _Solutions:
 # Solved windows: (sizes, points (3 floats each), covariances (3 x 3 nested lists), solutions).
 _Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
-_SIZES: dict[int, np.ndarray] = {}
+_SIZES: dict[tuple[int, int], np.ndarray] = {}
 # The map from the coefficients to the position at the reference time (no impact before it).
 _POSITION = np.zeros((3, 12))
 _POSITION[(0, 1, 2), (0, 3, 6)] = 1.0
 _POSITION.flags.writeable = False
 
 
-def _sizes(count: int) -> np.ndarray:
+def _sizes(count: int, windows: np.ndarray) -> np.ndarray:
     """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
-    sizes = _SIZES.get(count)
+    key = (count, int(windows[-1]))
+    sizes = _SIZES.get(key)
     if sizes is None:
-        sizes = _SIZES[count] = np.append(_WINDOWS[_WINDOWS < count], count)
+        sizes = _SIZES[key] = np.append(windows[windows < count], count)
     return sizes
 
 
@@ -344,6 +358,7 @@ class TrajectoryFuser(GatedEstimator):
     :param workspace_max_m: see :class:`pseudo_stereo_ros.fusion.Fuser` [m]
     :param max_window_s: longest window of the fit [s]
     :param consistency: Lepski's chi-square bound (3 d.o.f.) between windows' estimates
+        among constant-acceleration fits
     :param innovation_gate: chi-square bound (2 d.o.f.) beyond which a detection is pending
     :param min_sigma_px: floor of the measured detection noise [px]
     :param max_uncertainty: largest estimate standard deviation in pixels of the newest
@@ -392,6 +407,9 @@ class TrajectoryFuser(GatedEstimator):
         self.order = int(order)
         self.pending_estimate = pending_estimate
         self._names = names
+        # Window sizes [frames]: each camera contributes as many frames as in a pair's windows
+        # (more cameras must not shorten the windows' time spans).
+        self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -518,7 +536,8 @@ class TrajectoryFuser(GatedEstimator):
         A ``late`` detection, or a ``fresh`` one (its camera was silent for longer than
         its max gap), is fitted without gating: while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
-        the returning camera's detections stray.
+        the returning camera's detections stray; unless another camera's detection is
+        pending and the two confirm an impact (a camera silent across a bounce).
         """
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
         r0, r1, r2 = self._rotated_center[index]
@@ -536,7 +555,13 @@ class TrajectoryFuser(GatedEstimator):
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
-            self._pending = None  # the path is corrected by this detection, not judged
+            # The path is corrected by this detection, not judged; but if another camera's
+            # detection is pending, the two may show an impact while this camera was silent.
+            if self._pending is not None and self._break_range is None and \
+                    stamp - self._pending[0] <= self.gate.rig_gap_ns and \
+                    self._confirm_break(frame):
+                return self._estimate(stamp, index)
+            self._pending = None
         else:
             verdict = self._check(frame, prediction, equations)
             if verdict == 'pending':
@@ -574,7 +599,7 @@ class TrajectoryFuser(GatedEstimator):
         self._rhs[position] = rhs
         self._weight[position] = weight
         self._end = end = end + 1
-        start = max(self._start, end - _LONGEST)
+        start = max(self._start, end - int(self._windows[-1]))
         newest = int(self._stamp[end - 1])
         oldest = newest - self.max_window_ns
         stamps = self._stamp
@@ -983,8 +1008,8 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= _SHORTEST
-        sizes = _sizes(count) if quadratic else np.array((count,))
+        quadratic = self.order == 2 and count >= self._windows[0]
+        sizes = _sizes(count, self._windows) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
@@ -1024,22 +1049,42 @@ class TrajectoryFuser(GatedEstimator):
             kept = self._fits(system[0][:, _CV][:, :, _CV], system[1][:, _CV],
                               np.array((after,)), _CV, position, index)
         if kept is None:
-            self.stats['warming_up' if count < _WINDOWS[0] else 'degenerate'] += 1
+            self.stats['warming_up' if count < self._windows[0] else 'degenerate'] += 1
             return None
         kept_sizes, points, covariances, solutions = kept
         sigma2 = 1.0 if self.sigma_px is None else self.sigma_px ** 2
-        chosen = self._lepski(points, covariances, sigma2)
-        beta, inverse = self._full(*solutions[chosen])
-        point, covariance = points[chosen], covariances[chosen]
-        if quadratic and chosen == len(kept_sizes) - 1 and \
-                kept_sizes[chosen] >= _CV_SELECT_MIN:
-            # The model's order: the chosen window's constant velocity or free fall where
-            # its acceleration does not differ significantly from theirs.
-            lower = self._lower_order(beta, inverse, position, sigma2)
-            if lower is not None:
-                point, beta, inverse = lower
-                selector = position[:, :len(beta)]
-                covariance = (selector @ inverse @ selector.T).tolist()
+        longest = len(kept_sizes) - 1
+        model = None
+        if quadratic and kept_sizes[longest] >= _CV_SELECT_MIN:
+            # The model's order, from the longest window: a constant velocity or a free fall
+            # where its acceleration does not differ significantly from theirs.
+            model = self._lower_model(*self._full(*solutions[longest]), sigma2)
+        if model is None:
+            chosen = self._lepski(points, covariances, sigma2, self.consistency)
+            beta, inverse = self._full(*solutions[chosen])
+            point, covariance = points[chosen], covariances[chosen]
+        else:
+            # The window among that model's fits (its variance is far smaller than a
+            # parabola's at a short window's end, so a noisy short fit stops the rule less
+            # often and costs less when it does).
+            if isinstance(solutions, _Solutions):  # one stack: all windows at once
+                stacks = [(solutions.betas, solutions.inverses)]
+            else:  # windows with and without an impact's jump (9 or 12 unknowns)
+                stacks = []
+                for k in range(longest + 1):
+                    full_beta, full_inverse = self._full(*solutions[k])
+                    stacks.append((full_beta[None], full_inverse[None]))
+            lowers: list[tuple[np.ndarray, np.ndarray]] = []
+            points, covariances = [], []
+            for betas, inverses in stacks:
+                betas, inverses = self._lower_order(betas, inverses, model)
+                selector = position[:, :betas.shape[1]]
+                points += (betas @ selector.T).tolist()
+                covariances += (selector @ inverses @ selector.T).tolist()
+                lowers += zip(betas, inverses)
+            chosen = self._lepski(points, covariances, sigma2, _LOWER_CONSISTENCY)
+            beta, inverse = lowers[chosen]
+            point, covariance = points[chosen], covariances[chosen]
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -1064,40 +1109,54 @@ class TrajectoryFuser(GatedEstimator):
                     rows, rhs, weight, points[reference], covariances[reference]))
         return point
 
-    def _lower_order(self, beta: np.ndarray, inverse: np.ndarray, position: np.ndarray,
-                     sigma2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    @staticmethod
+    def _lower_model(beta: np.ndarray, inverse: np.ndarray, sigma2: float) -> int | None:
         """
-        Return a window's lower-order fit, if its acceleration fit does not reject it.
+        Return the lower-order model a window's acceleration fit does not reject, or None.
 
-        The candidates fix the acceleration: zero (a constant velocity) or the known
-        gravity :data:`GRAVITY_MPS2` along -z (a free fall).  Each is the acceleration
-        fit under a linear constraint, so its coefficients, their covariance and the
-        test (Wald's chi-square, 3 d.o.f., of the fitted acceleration against the fixed
-        one) follow from the acceleration fit's solution alone.  The candidate with the
-        smaller statistic is taken if that is within ``_ORDER_CONSISTENCY``; a velocity
-        jump at an impact stays free.
+        The candidates fix the acceleration: zero (0, a constant velocity) or the known
+        gravity :data:`GRAVITY_MPS2` along -z (1, a free fall).  The test is Wald's
+        chi-square (3 d.o.f.) of the fitted acceleration against the fixed one; the
+        candidate with the smaller statistic is taken if that is within
+        ``_ORDER_CONSISTENCY``.
 
         :param beta: (m,) the acceleration fit's coefficients at the event (m = 9 or 12)
         :param inverse: (m, m) their covariance per px^2
-        :param position: (3, 12) map from the coefficients to the position at the event
         :param sigma2: the detection noise's variance [px^2]
-        :return: (point (3 floats), beta (m,), inverse (m, m)) of the lower-order fit, or None
+        :return: the model's column in ``_FIXED_ACCELERATIONS``, or None
         """
-        gain = inverse[:, _ACCELERATION]  # (12, 3)
-        block = gain[_ACCELERATION]  # the acceleration's covariance per px^2
-        offsets = beta[_ACCELERATION, None] - _FIXED_ACCELERATIONS  # (3, 2)
-        try:
-            solved = np.linalg.solve(block, np.concatenate((offsets, gain.T), axis=1))
-        except np.linalg.LinAlgError:
-            return None
-        statistics = (offsets * solved[:, :2]).sum(axis=0) / sigma2
-        best = int(np.argmin(statistics))
-        if not 0.0 <= statistics[best] <= _ORDER_CONSISTENCY:
-            return None
-        lower_beta = beta - gain @ solved[:, best]
-        lower_beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, best]
-        lower_inverse = inverse - gain @ solved[:, 2:]
-        return (position[:, :len(beta)] @ lower_beta).tolist(), lower_beta, lower_inverse
+        # (Plain floats: a 3 x 3 form per candidate, the cost of every event.)
+        (a, b, c), (_, e, f), (_, _, i) = inverse[2:9:3, 2:9:3].tolist()
+        x, y, z = beta[2:9:3].tolist()
+        statistics = [_inverse_form(x - fixed_x, y - fixed_y, z - fixed_z, a, b, c, e, f, i)
+                      for fixed_x, fixed_y, fixed_z in _FIXED_LIST]
+        best = 0 if statistics[0] <= statistics[1] else 1
+        if not 0.0 < statistics[best] <= _ORDER_CONSISTENCY * sigma2:
+            return None  # (zero: a singular covariance)
+        return best
+
+    @staticmethod
+    def _lower_order(betas: np.ndarray, inverses: np.ndarray,
+                     model: int) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return windows' fits with their acceleration fixed (a lower-order model).
+
+        Each is the acceleration fit under a linear constraint, so its coefficients and
+        their covariance follow from the acceleration fit's solution alone; a velocity jump
+        at an impact stays free.
+
+        :param betas: (K, m) the acceleration fits' coefficients at the event (m = 9 or 12)
+        :param inverses: (K, m, m) their covariances per px^2
+        :param model: the column of ``_FIXED_ACCELERATIONS`` (:meth:`_lower_model`)
+        :return: the lower-order fits' coefficients (K, m) and covariances (K, m, m)
+        """
+        gains = inverses[:, :, _ACCELERATION]  # (K, m, 3)
+        offsets = betas[:, _ACCELERATION] - _FIXED_ACCELERATIONS[:, model]  # (K, 3)
+        solved = np.linalg.solve(gains[:, _ACCELERATION], np.concatenate(
+            (offsets[:, :, None], gains.transpose(0, 2, 1)), axis=2))  # (K, 3, 1 + m)
+        lower_betas = betas - np.matmul(gains, solved[:, :, :1])[:, :, 0]
+        lower_betas[:, _ACCELERATION] = _FIXED_ACCELERATIONS[:, model]
+        return lower_betas, inverses - np.matmul(gains, solved[:, :, 1:])
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1229,13 +1288,15 @@ class TrajectoryFuser(GatedEstimator):
         full_inverse[np.ix_(columns, columns)] = inverse
         return full_beta, full_inverse
 
-    def _lepski(self, points: list, covariances: list, sigma2: float) -> int:
+    @staticmethod
+    def _lepski(points: list, covariances: list, sigma2: float, consistency: float) -> int:
         """
         Return the index of the longest window consistent with every shorter one.
 
         :param points: the windows' positions (3 floats each), shortest window first
         :param covariances: their covariances per px^2 (3 x 3 nested lists)
         :param sigma2: the detection noise's variance [px^2]
+        :param consistency: the chi-square bound (3 d.o.f.) of two windows' disagreement
         """
         count = len(points)
         if count == 1:
@@ -1246,7 +1307,6 @@ class TrajectoryFuser(GatedEstimator):
         # the search at k - 1.
         first = covariances[0]
         ridge = 1e-12 * sigma2 * (first[0][0] + first[1][1] + first[2][2])
-        consistency = self.consistency
         for k in range(1, count):
             xk, yk, zk = points[k]
             (l00, l01, l02), (_, l11, l12), (_, _, l22) = covariances[k]
