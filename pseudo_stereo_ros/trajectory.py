@@ -139,6 +139,7 @@ import numpy as np
 from .camera import Camera
 from .errors import FuserConfigError
 from .estimator import GatedEstimator
+from .fusion import Fuser
 from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate
 from .timing import Admitted, INPUT_DROP_REASONS
@@ -406,6 +407,7 @@ class TrajectoryFuser(GatedEstimator):
     """
 
     method = 'trajectory'
+    methods = ('trajectory',)
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,
@@ -481,7 +483,6 @@ class TrajectoryFuser(GatedEstimator):
         # of its own plausibility test: this fuser's applies): its estimate stands in while
         # the fit has fewer than _PAPER_SUPPORT frames (a flight's first frames, a path
         # lost), where the fit extrapolates from too little.  It sees only those frames.
-        from .fusion import Fuser  # fusion imports this module
         self._paper = Fuser(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
                             image_margin=image_margin, max_speed_mps=None)
         self._paper.gate = self.gate
@@ -670,8 +671,8 @@ class TrajectoryFuser(GatedEstimator):
         if first == self._start:
             prefix[first] = 0.0
         stamps = self._stamp[first:end]
-        jump = None if self._break is None else stamps - self._break
-        maps = _position_map(stamps - reference, jump)
+        jumps = None if self._break is None else stamps - self._break
+        maps = _position_map(stamps - reference, jumps)
         weight = self._weight[first:end, None, None]
         design = np.empty((end - first, 2, 13))
         design[:, :, _AUGMENTED[:12]] = np.einsum('nra,nam->nrm', self._rows[first:end], maps)
@@ -1135,7 +1136,7 @@ class TrajectoryFuser(GatedEstimator):
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
         positions = _position_map(stamps - stamp, None if t_break is None
-                                       else stamps - t_break)[:, :, :len(beta)] @ beta
+                                  else stamps - t_break)[:, :, :len(beta)] @ beta
         cameras = self._camera[start:end]
         depth = np.einsum('ni,ni->n', positions - self._center[cameras],
                           self._rotation[cameras, 2])
