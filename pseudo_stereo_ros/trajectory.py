@@ -1013,14 +1013,12 @@ class TrajectoryFuser(GatedEstimator):
         shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
         prefix = self._prefix
         previous = end - sizes
-        # The unknowns first, the right-hand side last; a difference is a contiguous stack
-        # (numpy 1.26 and 2.x then multiply it the same way, bit for bit).
-        if t_break is None:
-            systems = prefix[end, :10, :10] - prefix[previous, :10, :10]
-        else:
-            systems = prefix[end][_AUGMENTED[:, None], _AUGMENTED] - \
-                prefix[previous[:, None, None], _AUGMENTED[:, None], _AUGMENTED]
-        systems = np.matmul(np.matmul(shift.T, systems), shift)
+        systems = prefix[end] - prefix.take(previous, axis=0)
+        # The unknowns first, the right-hand side last.
+        systems = systems[:, :10, :10] if t_break is None else \
+            systems[:, _AUGMENTED[:, None], _AUGMENTED]
+        # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
+        systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = _POSITION if t_break is None else _position_row(0, stamp - t_break)
         kept: _Fits | None = None
@@ -1185,9 +1183,9 @@ class TrajectoryFuser(GatedEstimator):
             inverses = np.linalg.inv(matrices)
         except np.linalg.LinAlgError:
             return None
-        # A (numerically) singular system leaves the diagonal of M M^-1 far from one.
+        # A (numerically) singular system leaves M M^-1 far from the identity.
         # (Ufuncs' own reductions: the array methods add a Python layer per call.)
-        unit = np.einsum('kij,kji->ki', matrices, inverses)
+        unit = np.add.reduce(matrices * inverses.transpose(0, 2, 1), axis=2)
         errors = np.maximum.reduce(np.abs(unit - 1.0), axis=1).tolist()
         betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
         if picks is None:
@@ -1199,13 +1197,15 @@ class TrajectoryFuser(GatedEstimator):
             covariances = inverses[:, :3 * picks:picks, :3 * picks:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
-        limit = self.max_uncertainty / self._focal_list[index]
+        limit = self.max_uncertainty / self._focal[index]
         limit2 = limit * limit
         (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
-        good = [k for k, ((x, y, z), ((v0, _, _), (_, v1, _), (_, _, v2)), error)
-                in enumerate(zip(points, covariances, errors))
-                if error < 1e-6 and (depth := (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2) > 0.0
-                and 0.0 < v0 + v1 + v2 <= limit2 * depth * depth]
+        good = []
+        for k, ((x, y, z), covariance, error) in enumerate(zip(points, covariances, errors)):
+            depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
+            variance = covariance[0][0] + covariance[1][1] + covariance[2][2]
+            if error < 1e-6 and depth > 0.0 and 0.0 < variance <= limit2 * depth * depth:
+                good.append(k)
         if not good:
             return None
         kept = sizes.tolist()
@@ -1269,24 +1269,14 @@ class TrajectoryFuser(GatedEstimator):
         for k in range(1, count):
             xk, yk, zk = points[k]
             (l00, l01, l02), (_, l11, l12), (_, _, l22) = covariances[k]
-            l00, l01, l02, l11, l12, l22 = \
-                0.9 * l00, 0.9 * l01, 0.9 * l02, 0.9 * l11, 0.9 * l12, 0.9 * l22
             for j in range(k):
                 xj, yj, zj = points[j]
                 (s00, s01, s02), (_, s11, s12), (_, _, s22) = covariances[j]
                 dx, dy, dz = xk - xj, yk - yj, zk - zj
-                # _inverse_form of the difference of covariances, inline (the hot loop).
-                a, b, c = sigma2 * (s00 - l00) + ridge, sigma2 * (s01 - l01), sigma2 * (s02 - l02)
-                e, f, i = sigma2 * (s11 - l11) + ridge, sigma2 * (s12 - l12), \
-                    sigma2 * (s22 - l22) + ridge
-                adj_a, adj_b, adj_c = e * i - f * f, c * f - b * i, b * f - c * e
-                determinant = a * adj_a + b * adj_b + c * adj_c
-                statistic = 0.0
-                if determinant != 0.0:
-                    adj_e, adj_f, adj_i = a * i - c * c, b * c - a * f, a * e - b * b
-                    statistic = (dx * dx * adj_a + dy * dy * adj_e + dz * dz * adj_i
-                                 + 2.0 * (dx * dy * adj_b + dx * dz * adj_c + dy * dz * adj_f)) \
-                        / determinant
+                statistic = _inverse_form(
+                    dx, dy, dz, sigma2 * (s00 - 0.9 * l00) + ridge, sigma2 * (s01 - 0.9 * l01),
+                    sigma2 * (s02 - 0.9 * l02), sigma2 * (s11 - 0.9 * l11) + ridge,
+                    sigma2 * (s12 - 0.9 * l12), sigma2 * (s22 - 0.9 * l22) + ridge)
                 if statistic <= 0.0:
                     # Not positive where the difference of covariances is not (windows with
                     # and without an impact are not nested models): the shorter window's
