@@ -36,7 +36,27 @@ from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
 from .timing import Admitted, InputGate, stamp_sort_key
 
-__all__ = ['GatedEstimator', 'camera_list']
+__all__ = ['GatedEstimator', 'camera_list', 'estimator_class']
+
+# Method name -> the class implementing it, filled as the classes are defined (see
+# GatedEstimator.methods).  The factory (pseudo_stereo_ros.fusion.make_fuser) looks classes
+# up here, so that fusion need not import the modules that build on it (trajectory uses the
+# paper method's Fuser as its stand-in): no import cycle.  The package imports every method.
+_CLASSES: dict[str, type[GatedEstimator]] = {}
+
+
+def estimator_class(method: str) -> type[GatedEstimator]:
+    """
+    Return the class that implements an estimation method.
+
+    :param method: the method's name (``paper``, ``naive``, ``trajectory``)
+    :raises FuserConfigError: no class implements it
+    """
+    try:
+        return _CLASSES[method]
+    except KeyError:
+        raise FuserConfigError(f'unknown method {method!r} (known: '
+                               f'{", ".join(sorted(_CLASSES))})') from None
 
 
 def camera_list(cameras: Sequence[Camera] | Mapping[str, Camera]) -> list[Camera]:
@@ -68,6 +88,15 @@ class GatedEstimator:
     :param workspace_max_m: see :class:`~pseudo_stereo_ros.fusion.Fuser` [m]
     :raises FuserConfigError: an invalid option, naming it
     """
+
+    #: The methods a subclass implements, registered for :func:`estimator_class`.
+    methods: tuple[str, ...] = ()
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        """Register a method's class under its :attr:`methods`."""
+        super().__init_subclass__(**kwargs)
+        for method in cls.__dict__.get('methods', ()):
+            _CLASSES[method] = cls
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,

@@ -72,13 +72,12 @@ import math
 
 from .camera import Camera
 from .errors import FuserConfigError
-from .estimator import GatedEstimator
+from .estimator import estimator_class, GatedEstimator
 from .geometry import fundamental_matrix, nearest_point_on_line_one, triangulate_rays_one
 from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate, Observation, Point3
 from .timing import (Admitted, DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_SYNC_TOLERANCE_NS,
                      INPUT_DROP_REASONS)
-from .trajectory import TrajectoryFuser
 
 __all__ = [
     'DEFAULT_IMAGE_MARGIN',
@@ -169,6 +168,8 @@ class Fuser(GatedEstimator):
     :param workspace_max_m: upper corner (x, y, z) of the workspace [m]
     :raises FuserConfigError: an invalid option, naming it
     """
+
+    methods = _FUSER_METHODS
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  method: str = 'paper', sync_tolerance_ns: int | None = None,
@@ -398,13 +399,15 @@ def make_fuser(cameras: Sequence[Camera] | Mapping[str, Camera], *,
         (``update``, ``process``, ``reset``, ``stats``)
     :raises FuserConfigError: an unknown method or an invalid option
     """
-    if method == 'trajectory':
-        return TrajectoryFuser(cameras, sync_tolerance_ns=sync_tolerance_ns,
-                               max_gap_ns=max_gap_ns, image_margin=image_margin,
-                               max_speed_mps=max_speed_mps, workspace_min_m=workspace_min_m,
-                               workspace_max_m=workspace_max_m, **method_options)
     if method not in METHODS:
         raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+    if method not in _FUSER_METHODS:
+        # Looked up, not imported: the trajectory module imports this one (the paper
+        # method stands in for its first frames).
+        return estimator_class(method)(
+            cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
+            image_margin=image_margin, max_speed_mps=max_speed_mps,
+            workspace_min_m=workspace_min_m, workspace_max_m=workspace_max_m, **method_options)
     if method_options:
         raise FuserConfigError(f'method {method!r} takes no option '
                                f'{", ".join(sorted(method_options))}')

@@ -147,6 +147,7 @@ import numpy as np
 from .camera import Camera
 from .errors import FuserConfigError
 from .estimator import GatedEstimator
+from .fusion import Fuser
 from .plausibility import DEFAULT_MAX_SPEED_MPS
 from .records import Estimate
 from .timing import Admitted, INPUT_DROP_REASONS
@@ -276,9 +277,62 @@ class _Solutions:
 _Fits: TypeAlias = tuple[list, list, list, _Solutions | list[_Solution]]
 
 _SIZES: dict[tuple[int, int], np.ndarray] = {}
+
+
+# The position map: the position at a time is ``P @ beta`` with, per axis, the powers
+# tau^0, tau^1, tau^2 of the time from the path's reference (in _SCALE_NS) at that axis's
+# coefficients, and the time since the impact (zero before it) at the axis's velocity jump.
+# _map_terms is its float form (the per-event paths), _position_map its array form; both
+# write the same entries (tested), _position_row is the array form at one time.
+
+def _map_terms(offset_ns: int, jump_offset_ns: int | None) -> tuple[float, float, float]:
+    """
+    Return the position map's entries at one time: ``tau``, ``tau^2`` and the jump's factor.
+
+    :param offset_ns: time from the path's reference [ns]
+    :param jump_offset_ns: time from the impact [ns], or None without one
+    :return: ``(tau, tau^2, jump)`` with ``tau`` in units of _SCALE_NS and ``jump`` the time
+        since the impact in the same units, 0.0 before it or without one
+    """
+    tau = offset_ns / _SCALE_NS
+    jump = 0.0 if jump_offset_ns is None or jump_offset_ns <= 0 else jump_offset_ns / _SCALE_NS
+    return tau, tau * tau, jump
+
+
+def _position_map(offsets_ns: np.ndarray, jump_offsets_ns: np.ndarray | None) -> np.ndarray:
+    """
+    Return (N, 3, 12) maps from the coefficients to positions (the array form of _map_terms).
+
+    :param offsets_ns: (N,) times from the path's reference [ns]
+    :param jump_offsets_ns: (N,) times from the impact [ns], or None without one
+    """
+    tau = np.asarray(offsets_ns, dtype=float) / _SCALE_NS
+    maps = np.zeros((len(tau), 3, 12))
+    jump = None if jump_offsets_ns is None else \
+        np.maximum(0.0, np.asarray(jump_offsets_ns, dtype=float) / _SCALE_NS)
+    for axis in range(3):
+        maps[:, axis, 3 * axis] = 1.0
+        maps[:, axis, 3 * axis + 1] = tau
+        maps[:, axis, 3 * axis + 2] = tau * tau
+        if jump is not None:
+            maps[:, axis, 9 + axis] = jump
+    return maps
+
+
+def _position_row(offset_ns: int, jump_offset_ns: int | None) -> np.ndarray:
+    """Return the (3, 12) position map at one time (:func:`_position_map` of one time)."""
+    tau, tau2, jump = _map_terms(offset_ns, jump_offset_ns)
+    row = np.zeros((3, 12))
+    row[0, 0] = row[1, 3] = row[2, 6] = 1.0
+    row[0, 1] = row[1, 4] = row[2, 7] = tau
+    row[0, 2] = row[1, 5] = row[2, 8] = tau2
+    if jump:
+        row[0, 9] = row[1, 10] = row[2, 11] = jump
+    return row
+
+
 # The map from the coefficients to the position at the reference time (no impact before it).
-_POSITION = np.zeros((3, 12))
-_POSITION[(0, 1, 2), (0, 3, 6)] = 1.0
+_POSITION = _position_row(0, None)
 _POSITION.flags.writeable = False
 
 
@@ -368,6 +422,7 @@ class TrajectoryFuser(GatedEstimator):
     """
 
     method = 'trajectory'
+    methods = ('trajectory',)
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,
@@ -446,7 +501,6 @@ class TrajectoryFuser(GatedEstimator):
         # of its own plausibility test: this fuser's applies): its estimate stands in while
         # the fit has fewer than _PAPER_SUPPORT frames (a flight's first frames, a path
         # lost), where the fit extrapolates from too little.  It sees only those frames.
-        from .fusion import Fuser  # fusion imports this module
         self._paper = Fuser(cameras, sync_tolerance_ns=sync_tolerance_ns, max_gap_ns=max_gap_ns,
                             image_margin=image_margin, max_speed_mps=None)
         self._paper.gate = self.gate
@@ -621,28 +675,29 @@ class TrajectoryFuser(GatedEstimator):
         prefix = self._prefix
         if first == end - 1 and first > self._start:  # the common case: one frame appended
             stamp = int(self._stamp[first])
-            tau = (stamp - reference) / _SCALE_NS
-            powers = (1.0, tau, tau * tau)
-            frame_weight = float(self._weight[first])
-            jump_tau = None
-            if self._break is not None and stamp > self._break:
-                jump_tau = (stamp - self._break) / _SCALE_NS
+            tau, tau2, jump = _map_terms(stamp - reference,
+                                         None if self._break is None else stamp - self._break)
+            w = float(self._weight[first])
+            (a0, a1, a2), (b0, b1, b2) = self._rows[first].tolist()
+            q0, q1 = self._rhs[first].tolist()
             # rows (2, 3) times the (3, 12) position map: per axis the powers of tau, then
             # the right-hand side and the jump's columns (the order of _AUGMENTED).
-            design = np.array([[value * power * frame_weight for value in row
-                                for power in powers]
-                               + [rhs * frame_weight]
-                               + ([0.0] * 3 if jump_tau is None else
-                                  [value * jump_tau * frame_weight for value in row])
-                               for row, rhs in zip(self._rows[first].tolist(),
-                                                   self._rhs[first].tolist())])
+            design = np.array((
+                (a0 * w, a0 * tau * w, a0 * tau2 * w, a1 * w, a1 * tau * w, a1 * tau2 * w,
+                 a2 * w, a2 * tau * w, a2 * tau2 * w, q0 * w,
+                 a0 * jump * w if jump else 0.0, a1 * jump * w if jump else 0.0,
+                 a2 * jump * w if jump else 0.0),
+                (b0 * w, b0 * tau * w, b0 * tau2 * w, b1 * w, b1 * tau * w, b1 * tau2 * w,
+                 b2 * w, b2 * tau * w, b2 * tau2 * w, q1 * w,
+                 b0 * jump * w if jump else 0.0, b1 * jump * w if jump else 0.0,
+                 b2 * jump * w if jump else 0.0)))
             np.add(prefix[first], design.T @ design, out=prefix[end])
             return
         if first == self._start:
             prefix[first] = 0.0
         stamps = self._stamp[first:end]
-        jump = None if self._break is None else stamps - self._break
-        maps = self._position_map(stamps - reference, jump)
+        jumps = None if self._break is None else stamps - self._break
+        maps = _position_map(stamps - reference, jumps)
         weight = self._weight[first:end, None, None]
         design = np.empty((end - first, 2, 13))
         design[:, :, _AUGMENTED[:12]] = np.einsum('nra,nam->nrm', self._rows[first:end], maps)
@@ -653,42 +708,11 @@ class TrajectoryFuser(GatedEstimator):
 
     # -- the path -------------------------------------------------------------------------------
 
-    @staticmethod
-    def _position_map(offsets_ns: np.ndarray, jump_offsets_ns: np.ndarray | None) -> np.ndarray:
-        """
-        Return (N, 3, 12) maps from the coefficients to positions.
-
-        :param offsets_ns: (N,) times from the path's reference [ns]
-        :param jump_offsets_ns: (N,) times from the impact [ns], or None without one
-        """
-        tau = np.asarray(offsets_ns, dtype=float) / _SCALE_NS
-        maps = np.zeros((len(tau), 3, 12))
-        for axis in range(3):
-            maps[:, axis, 3 * axis] = 1.0
-            maps[:, axis, 3 * axis + 1] = tau
-            maps[:, axis, 3 * axis + 2] = tau * tau
-            if jump_offsets_ns is not None:
-                maps[:, axis, 9 + axis] = np.maximum(
-                    0.0, np.asarray(jump_offsets_ns, dtype=float) / _SCALE_NS)
-        return maps
-
-    @staticmethod
-    def _position_row(offset_ns: int, jump_offset_ns: int | None) -> np.ndarray:
-        """Return the (3, 12) map of :meth:`_position_map` at one time (the fast path)."""
-        tau = offset_ns / _SCALE_NS
-        row = np.zeros((3, 12))
-        row[0, 0] = row[1, 3] = row[2, 6] = 1.0
-        row[0, 1] = row[1, 4] = row[2, 7] = tau
-        row[0, 2] = row[1, 5] = row[2, 8] = tau * tau
-        if jump_offset_ns is not None and jump_offset_ns > 0:
-            row[0, 9] = row[1, 10] = row[2, 11] = jump_offset_ns / _SCALE_NS
-        return row
-
     def _predict(self, stamp: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the predicted position (3,) [m] and its covariance (3, 3) per px^2."""
         assert self._path is not None, 'predictions are made only once a path was fitted'
         t_ref, beta, covariance, t_break, _ = self._path
-        row = self._position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
+        row = _position_row(stamp - t_ref, None if t_break is None else stamp - t_break)
         row = row[:, :len(beta)]
         return row @ beta, row @ covariance @ row.T
 
@@ -696,12 +720,10 @@ class TrajectoryFuser(GatedEstimator):
         """Return the predicted position [m] as floats (the fast path of :meth:`_predict`)."""
         assert self._path is not None, 'predictions are made only once a path was fitted'
         t_ref, _, _, t_break, coefficients = self._path
-        tau = (stamp - t_ref) / _SCALE_NS
-        tau2 = tau * tau
+        tau, tau2, jump = _map_terms(stamp - t_ref, None if t_break is None else stamp - t_break)
         x0, x1, x2, y0, y1, y2, z0, z1, z2, jx, jy, jz = coefficients
         x, y, z = x0 + x1 * tau + x2 * tau2, y0 + y1 * tau + y2 * tau2, z0 + z1 * tau + z2 * tau2
-        if t_break is not None and stamp > t_break:
-            jump = (stamp - t_break) / _SCALE_NS
+        if jump:
             x, y, z = x + jx * jump, y + jy * jump, z + jz * jump
         return x, y, z
 
@@ -813,14 +835,11 @@ class TrajectoryFuser(GatedEstimator):
         """
         assert self._path is not None, 'predictions are made only once a path was fitted'
         t_ref, _, covariance, t_break, _ = self._path
-        tau = (stamp - t_ref) / _SCALE_NS
-        powers = (1.0, tau, tau * tau)
-        jump = None
-        if len(covariance) == 12 and t_break is not None and stamp > t_break:
-            jump = (stamp - t_break) / _SCALE_NS
+        tau, tau2, jump = _map_terms(stamp - t_ref, None if t_break is None else stamp - t_break)
+        powers = (1.0, tau, tau2)
         rows = np.array([[value * power for value in row for power in powers]
-                         + ([] if len(covariance) == 9 else [0.0] * 3 if jump is None else
-                            [value * jump for value in row])
+                         + ([] if len(covariance) == 9 else [value * jump for value in row]
+                            if jump else [0.0] * 3)
                          for row in equations[:2]])
         return float(np.vdot(rows @ covariance, rows))
 
@@ -911,7 +930,7 @@ class TrajectoryFuser(GatedEstimator):
         # The jump must explain both new frames: their residuals within the gate, or at
         # least ten times smaller (squared) than without it (the impact time is only known
         # to a grid step until later frames refine it).
-        maps = self._position_map(stamps[-2:] - int(frame[0]), stamps[-2:] - t_break)
+        maps = _position_map(stamps[-2:] - int(frame[0]), stamps[-2:] - t_break)
         assert self.sigma_px is not None, '_check gates detections only with a mature noise'
         spread = max(self.sigma_px ** 2, self._spread or 0.0)
         for k in (-2, -1):
@@ -945,7 +964,7 @@ class TrajectoryFuser(GatedEstimator):
         else:
             candidates = np.linspace(low, high, _BREAK_GRID + 2)[1:-1].astype(np.int64)
         offsets = stamps - stamp
-        base = self._position_map(offsets, None)  # (n, 3, 12) without the jump
+        base = _position_map(offsets, None)  # (n, 3, 12) without the jump
         design = np.einsum('nra,nam->nrm', rows, base) * weights[:, None, None]
         vector = (rhs * weights[:, None]).reshape(-1)
         best: tuple[float, int, np.ndarray] | None = None
@@ -1026,7 +1045,7 @@ class TrajectoryFuser(GatedEstimator):
         # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
         systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
-        position = _POSITION if t_break is None else self._position_row(0, stamp - t_break)
+        position = _POSITION if t_break is None else _position_row(0, stamp - t_break)
         kept: _Fits | None = None
         if quadratic:
             if t_break is None:
@@ -1162,7 +1181,7 @@ class TrajectoryFuser(GatedEstimator):
                        end: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
         stamps = self._stamp[first:end]
-        maps = self._position_map(stamps - stamp, None)
+        maps = _position_map(stamps - stamp, None)
         weight = self._weight[first:end, None, None]
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
         rhs = self._rhs[first:end] * weight[:, :, 0]
@@ -1173,8 +1192,8 @@ class TrajectoryFuser(GatedEstimator):
         """Set the weights of a new flight's first frames from its first path."""
         start, end = self._start, self._end
         stamps = self._stamp[start:end]
-        positions = self._position_map(stamps - stamp, None if t_break is None
-                                       else stamps - t_break)[:, :, :len(beta)] @ beta
+        positions = _position_map(stamps - stamp, None if t_break is None
+                                  else stamps - t_break)[:, :, :len(beta)] @ beta
         cameras = self._camera[start:end]
         depth = np.einsum('ni,ni->n', positions - self._center[cameras],
                           self._rotation[cameras, 2])

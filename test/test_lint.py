@@ -135,3 +135,19 @@ def test_core_imports_without_rclpy_in_a_fresh_interpreter():
                             timeout=120, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert len(modules) >= 8  # calibration, camera, geometry, fusion, simulation, cli, ...
+
+
+def test_fusion_and_trajectory_do_not_import_each_other():
+    # trajectory builds on fusion (the paper method stands in for a fit's first frames);
+    # fusion's factory finds the trajectory class by name (estimator_class), without an
+    # import back, at module level or inside a function.
+    fusion = {name for _, name in _imports(PACKAGE / 'fusion.py')}
+    trajectory = {name for _, name in _imports(PACKAGE / 'trajectory.py')}
+    assert not any(name.startswith('pseudo_stereo_ros.trajectory') for name in fusion), fusion
+    assert 'pseudo_stereo_ros.fusion' in trajectory, trajectory
+    # Every method the factory offers resolves to its class.
+    from pseudo_stereo_ros.estimator import estimator_class
+    from pseudo_stereo_ros.fusion import Fuser, METHODS
+    from pseudo_stereo_ros.trajectory import TrajectoryFuser
+    assert {method: estimator_class(method) for method in METHODS} == {
+        'paper': Fuser, 'naive': Fuser, 'trajectory': TrajectoryFuser}

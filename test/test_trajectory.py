@@ -43,7 +43,8 @@ from pseudo_stereo_ros.fusion import fuse, make_fuser
 from pseudo_stereo_ros.records import Observation, positions_array
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, observe, Scenario,
                                              shutter_stamps, truth_at)
-from pseudo_stereo_ros.trajectory import TrajectoryFuser
+from pseudo_stereo_ros.trajectory import (_map_terms, _position_map, _position_row,
+                                          TrajectoryFuser)
 import pytest
 
 LFG = Path(__file__).resolve().parent / 'data' / 'lfg_table_tennis'
@@ -364,7 +365,7 @@ def test_window_fits_give_the_position_at_the_event_with_or_without_the_jump(jum
     beta = 0.01 * rng.normal(size=12)
     beta[[0, 3, 6]] = target
     moments = matrices @ beta
-    position = TrajectoryFuser._position_row(0, jump_offset_ns)
+    position = _position_row(0, jump_offset_ns)
     sizes, points, covariances, _ = fuser._fits(matrices, moments, np.array((13, 19, 28)), 12,
                                                 position, 0)
     assert sizes == [13, 19, 28]
@@ -373,6 +374,60 @@ def test_window_fits_give_the_position_at_the_event_with_or_without_the_jump(jum
         np.testing.assert_allclose(point, expected, atol=1e-9)
         np.testing.assert_allclose(covariance, position @ np.linalg.inv(matrix) @ position.T,
                                    rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize('jump_offset_ns', [None, -7_000_000, 0, 1, 23_000_000])
+@pytest.mark.parametrize('offset_ns', [-1_234_567_891, -40_000_000, 0, 16_666_667, 700_000_001])
+def test_the_position_map_forms_agree(offset_ns, jump_offset_ns):
+    # The position map (powers of tau, the jump after an impact) has a float form for the
+    # per-event paths and an array form for the batched ones: the same entries, bit for bit.
+    # Independently: tau = offset / 0.1 s, the jump's factor = time since the impact (0 before).
+    tau, tau2, jump = _map_terms(offset_ns, jump_offset_ns)
+    assert tau == offset_ns / 1e8 and tau2 == tau * tau
+    assert jump == (0.0 if jump_offset_ns is None else max(0.0, jump_offset_ns / 1e8))
+    row = _position_row(offset_ns, jump_offset_ns)
+    mapped = _position_map(np.array([offset_ns]),
+                           None if jump_offset_ns is None else np.array([jump_offset_ns]))[0]
+    assert np.array_equal(row, mapped)
+    expected = np.zeros((3, 12))
+    for axis in range(3):
+        expected[axis, 3 * axis:3 * axis + 3] = (1.0, tau, tau2)
+        expected[axis, 9 + axis] = jump
+    assert np.array_equal(row, expected)
+    # The float prediction equals the array one (the path's coefficients through the row).
+    fuser = TrajectoryFuser(default_rig())
+    beta = np.random.default_rng(7).normal(size=12)
+    t_ref = 10**18
+    t_break = None if jump_offset_ns is None else t_ref + offset_ns - jump_offset_ns
+    fuser._path = (t_ref, beta, np.eye(12), t_break, beta.tolist())
+    point, _ = fuser._predict(t_ref + offset_ns)
+    np.testing.assert_allclose(fuser._predict_point(t_ref + offset_ns), point,
+                               rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize('scenario', ['spiral', 'bounce'])
+def test_prefix_sums_appended_frame_by_frame_equal_a_full_rebuild(scenario):
+    # The prefix sums grow by one frame per event (the float form of the position map); a
+    # rebuild from the window's first frame uses the array form: both must hold the same
+    # sums, also after impacts (the jump's columns).
+    cameras = default_rig()
+    data = simulate_run(Run(scenario, noise_px=0.3), cameras)
+    fuser = TrajectoryFuser(cameras)
+    checked = 0
+    for k, observation in enumerate(sorted(data.observations, key=lambda o: o.stamp_ns)):
+        fuser.update(observation)
+        if k % 10 == 9 and fuser._end - fuser._start > 1:
+            start, end = fuser._start, fuser._end
+            # Sums since the window's first frame (appended prefixes start from older ones).
+            grown = fuser._prefix[start + 1:end + 1] - fuser._prefix[start]
+            scale = np.abs(fuser._prefix[start:end + 1]).max()
+            fuser._rebuild(start)
+            np.testing.assert_allclose(fuser._prefix[start + 1:end + 1], grown, rtol=0,
+                                       atol=1e-12 * scale)
+            checked += 1
+    assert checked >= 5
+    if scenario == 'bounce':
+        assert fuser.stats['breaks'] >= 1
 
 
 @pytest.mark.parametrize('fps', [30.0, 60.0])
