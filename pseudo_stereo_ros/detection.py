@@ -233,6 +233,11 @@ class BallDetector:
             return False
         last, motion, stats = self.last, self._motion, self.stats
         self.stats = Counter()
+        if motion is not None:
+            # The previous frame's ball was at the last detection: predict it there, so the
+            # warm-up takes the tight window's path, as the next detection will (a miss would
+            # search the square too: a quarter more CPU, measured).
+            self.last = (last[0] - motion[0], last[1] - motion[1])
         try:
             self.detect(image, encoding)
         finally:
@@ -284,11 +289,11 @@ class BallDetector:
             self.last = self._motion = None
             return None
         stats['detections'] += 1
-        u, v, size = found
+        ball_u, ball_v, size = found
         # Image velocity from two detections in a row (frames without a ball break the chain).
         self._motion = (None if self.last is None else
-                        (u - self.last[0], v - self.last[1], size))
-        self.last = (u, v)
+                        (ball_u - self.last[0], ball_v - self.last[1], size))
+        self.last = (ball_u, ball_v)
         return self.last
 
     # -- steps ----------------------------------------------------------------------------------
