@@ -45,10 +45,14 @@ once per ``report_period_s`` while it fails, retried with a doubling back-off,
 and resumes by itself.  Frames of a live source older than ``max_frame_age_s``
 when read (a driver's queue after an outage) and frames not newer than the
 last one handed on are dropped and counted, so nothing stale goes out.  With
-``warm_up`` it calls that ``warm_up_s`` before a frame is due, when the source
-waits for its frame's time (the file and virtual sources; a device blocks in
-the driver and gets none): a detector that last ran a frame period ago runs
-two to three times slower, its caches cold, than one run just before.
+``warm_up`` it calls that ``warm_up_s`` before a frame is due: the file and
+virtual sources wait for each frame's time; for a device, whose ``read()``
+blocks in the driver, the next frame's arrival is predicted from the last
+driver stamps (their period) and the shortest recent driver latency, and
+the loop waits for the warm-up before it calls ``read()`` (only while the
+stamps are regular to within ``warm_up_s``; not with read-time stamps):
+a detector that last ran a frame period ago runs two to three times
+slower, its caches cold, than one run just before.
 A source has ``description``, ``live`` (frames come from the physical world
 now), ``is_open``, ``start() -> warnings`` (open it; :class:`CaptureError`
 when it cannot), ``read(wait) -> Frame or None`` (None: the end, or asked to
@@ -58,7 +62,7 @@ ROS-free: the ``camera_detector`` node is the glue.
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import math
@@ -95,6 +99,8 @@ _FUTURE_TOLERANCE_NS = 5_000_000
 _CLOCK_WINDOW_NS = 60_000_000_000
 #: A virtual frame more than this many periods late is skipped, not delivered in a burst.
 _MAX_CATCH_UP = 3
+#: Driver-stamped frames in a row a device's warm-up predicts the next frame from.
+_WARM_UP_HISTORY = 9
 
 
 class _Capture(Protocol):
@@ -678,9 +684,11 @@ class CaptureLoop:
     :param max_frame_age_s: frames of a live source older than this when read are dropped
         (``stale``) [s]
     :param warm_up: called ``warm_up_s`` before a frame is due, when the source waits for the
-        frame's time (``warm_ups`` counts the calls); None for none
+        frame's time or, for a live source, before its predicted arrival (``warm_ups`` counts
+        the calls); None for none
     :param warm_up_s: how long before the frame is due [s]
     :param clock: monotonic clock [s] for the reports and the warm-up (injectable for tests)
+    :param system_ns: the system clock [ns] (of the frames' stamps; injectable for tests)
     """
 
     def __init__(self, source: _Source, on_frame: Callable[[Frame], None], *,
@@ -688,7 +696,8 @@ class CaptureLoop:
                  report_period_s: float = 1.0, retry_initial_s: float = 0.1,
                  retry_max_s: float = 2.0, max_frame_age_s: float = 0.5,
                  warm_up: Callable[[], None] | None = None, warm_up_s: float = 0.002,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 system_ns: Callable[[], int] = time.time_ns):
         if not (0 < retry_initial_s <= retry_max_s):
             raise CaptureError(f'need 0 < retry_initial_s <= retry_max_s, got '
                                f'{retry_initial_s}, {retry_max_s}')
@@ -704,6 +713,11 @@ class CaptureLoop:
         self.warm_up = warm_up
         self.warm_up_s = float(warm_up_s)
         self.clock = clock
+        self.system_ns = system_ns
+        # (stamp, available) [ns] of the last driver-stamped frames of a live source.
+        self._arrivals: deque[tuple[int, int]] = deque(maxlen=_WARM_UP_HISTORY)
+        # Set once the source waits for its frames' times itself (the warm-up runs in the wait).
+        self._source_waits = False
         #: Counts: ``frames`` read, ``delivered``, ``stale``, ``not_newer``, ``failures``,
         #: ``reports``, ``recoveries``, ``warm_ups``.
         self.stats: Counter[str] = Counter()
@@ -724,6 +738,7 @@ class CaptureLoop:
         return min(self.retry_initial_s * 2.0 ** min(exponent, 30), self.retry_max_s)
 
     def _failed(self, error: CaptureError) -> None:
+        self._arrivals.clear()
         now = self.clock()
         self.stats['failures'] += 1
         self._outage_failures += 1
@@ -774,6 +789,7 @@ class CaptureLoop:
         warm_up = self.warm_up
 
         def wait(seconds: float) -> bool:
+            self._source_waits = True
             if seconds <= self.warm_up_s:
                 return stop.wait(seconds)
             end = self.clock() + seconds
@@ -784,6 +800,36 @@ class CaptureLoop:
             return stop.wait(max(end - self.clock(), 0.0))
 
         return wait
+
+    def _warm_up_live(self, stop: _Stop) -> bool:
+        """
+        Before a live source's ``read()``: wait for, and run, the warm-up of its next frame.
+
+        The frame is predicted at the last stamp plus the stamps' period (their
+        median step) plus the shortest recent latency (stamp -> available), which
+        a frame does not beat, so waiting here delays none; nothing happens while
+        the steps vary by more than ``warm_up_s`` (dropped frames, a variable rate)
+        or when the prediction leaves less than ``warm_up_s``.
+
+        :return: True when asked to stop
+        """
+        arrivals = self._arrivals
+        if self.warm_up is None or self._source_waits or len(arrivals) < _WARM_UP_HISTORY:
+            return False
+        stamps = [stamp for stamp, _ in arrivals]
+        steps = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+        if steps[-1] - steps[0] > self.warm_up_s * 1e9:
+            return False
+        latency = min(available - stamp for stamp, available in arrivals)
+        due_ns = stamps[-1] + steps[len(steps) // 2] + latency
+        lead_s = (due_ns - self.system_ns()) / 1e9
+        if lead_s <= self.warm_up_s:
+            return False
+        if stop.wait(lead_s - self.warm_up_s):
+            return True
+        self.warm_up()
+        self.stats['warm_ups'] += 1
+        return False
 
     def run(self, stop: _Stop) -> str:
         """
@@ -803,6 +849,8 @@ class CaptureLoop:
                     self._failed(err)
                     self._wait_to_retry(stop)
                     continue
+            if self.source.live and self._warm_up_live(stop):
+                break
             try:
                 frame = self.source.read(wait)
             except CaptureError as err:
@@ -825,6 +873,11 @@ class CaptureLoop:
                 self.stats['not_newer'] += 1
                 continue
             self._last_stamp_ns = frame.stamp_ns
+            if self.source.live:
+                if frame.stamp_source.startswith('driver'):
+                    self._arrivals.append((frame.stamp_ns, frame.available_ns))
+                else:
+                    self._arrivals.clear()
             self.stats['delivered'] += 1
             self.on_frame(frame)
         return 'stopped'

@@ -481,3 +481,76 @@ def test_virtual_source_skips_frames_it_is_late_for_and_pauses_between_flights()
     assert truth is None and BallDetector().detect(image) is None
     ended = VirtualSource(camera, scenario='spiral', epoch_ns=now[0], loop=False)
     assert ended.render(index) == (None, None)
+
+
+class DriverPacedSource:
+    """
+    A live source on the fake clock like a V4L2 device: ``read()`` blocks until the next frame.
+
+    Frame k is captured at ``k * period + jitter_k`` and arrives ``latency + extra_k`` later;
+    ``read()`` returns the oldest frame not yet read (the driver's queue) and never calls
+    ``wait``.  ``read_at`` notes when each frame was read, against its arrival.
+    """
+
+    live = True
+    description = 'driver-paced'
+    is_open = True
+
+    def __init__(self, clock, *, period_s=1 / 30, latency_s=0.008, jitter_s=0.0002,
+                 extra_s=0.0005, stamp_source='driver', seed=0):
+        rng = np.random.default_rng(seed)
+        self.clock = clock
+        self.period_s, self.latency_s = period_s, latency_s
+        self.jitter = rng.uniform(-jitter_s, jitter_s, 10000)
+        self.extra = rng.uniform(0.0, extra_s, 10000)
+        self.stamp_source = stamp_source
+        self.index = 0
+        self.read_at = []  # (arrival, read) [s] per frame
+
+    def start(self):
+        return []
+
+    def release(self):
+        pass
+
+    def read(self, wait):
+        k = self.index
+        self.index += 1
+        stamp = 0.1 + k * self.period_s + self.jitter[k]
+        arrival = stamp + self.latency_s + self.extra[k]
+        self.clock[0] = max(self.clock[0], arrival)  # blocks in the driver
+        self.read_at.append((arrival, self.clock[0]))
+        stamp_ns = int(stamp * 1e9) if self.stamp_source == 'driver' else int(self.clock[0] * 1e9)
+        return Frame(np.zeros((4, 4, 3), np.uint8), 'bgr8', stamp_ns, int(self.clock[0] * 1e9),
+                     k, self.stamp_source)
+
+
+@pytest.mark.parametrize('stamp_source', ['driver', 'read time'])
+def test_device_warm_up_comes_before_the_predicted_frame_and_delays_none(stamp_source):
+    # A device blocks in read(): the loop predicts the next arrival from the driver's stamps
+    # (period) and the shortest latency seen, and warms up 2 ms before it. Waiting for the
+    # warm-up must not make a frame wait in the driver's queue: arrivals come no earlier than
+    # the shortest latency seen.
+    clock = [0.0]
+    # The latency varies by 3 ms, more than warm_up_s: only the shortest one is safe to use.
+    source = DriverPacedSource(clock, stamp_source=stamp_source, extra_s=0.003)
+    frames, warm_ups = [], []
+    loop = CaptureLoop(source, frames.append, warm_up=lambda: warm_ups.append(clock[0]),
+                       warm_up_s=0.002, clock=lambda: clock[0],
+                       system_ns=lambda: int(clock[0] * 1e9))
+    stop = FakeStop(clock, until_s=2.0)
+    loop.run(stop)
+    assert len(frames) >= 55
+    if stamp_source != 'driver':
+        assert not warm_ups  # read-time stamps say nothing about the next frame
+        return
+    # From the tenth frame on (nine stamps predict the next), one warm-up before each frame.
+    assert len(warm_ups) >= len(frames) - 10 and loop.stats['warm_ups'] == len(warm_ups)
+    arrivals = [arrival for arrival, _ in source.read_at]
+    for time_s in warm_ups:
+        following = min(a for a in arrivals if a > time_s)
+        # warm_up_s before the frame, give or take the spread of the latency (3 ms) and of
+        # the capture times (2 x 0.2 ms jitter, once in the frame, once in the median step).
+        assert 0.002 - 0.0008 <= following - time_s <= 0.002 + 0.003 + 0.0008
+    for arrival, read in source.read_at:
+        assert read == arrival  # no frame waited for the warm-up

@@ -447,7 +447,7 @@ def hop_probe_main(argv: Optional[List[str]] = None) -> int:
     return 0
 
 
-def bench_camera_detectors(seconds: float) -> dict:
+def bench_camera_detectors(seconds: float, *, warm_up_s: Optional[float] = None) -> dict:
     """
     Time two ``camera_detector`` processes (virtual source) feeding a fuser in this process.
 
@@ -463,6 +463,8 @@ def bench_camera_detectors(seconds: float) -> dict:
     subscription in the same executor.
 
     :param seconds: measured time after the processes are connected [s]
+    :param warm_up_s: the camera_detectors' ``warm_up_s`` (0: none, the detector cold as
+        without a prediction of the next frame); None for the node's default
     :return: ``points`` (shutter stamp -> the fuser's callback starts [s]), ``positions``
         (shutter stamp -> ``/ball/position`` published [s]), ``hop`` (bare hop [s]),
         ``fuser`` (the fuser node's receive -> publish [s]) and ``diagnostics`` (camera name
@@ -477,8 +479,9 @@ def bench_camera_detectors(seconds: float) -> dict:
         '--ros-args', '-r', f'__ns:=/{namespace}/{name}', '-p', 'source:=virtual',
         '-p', f'calibration_file:={_rig_file(name)}', '-p', 'fps:=30.0',
         '-p', f'phase_s:={index / 60.0}', '-p', f'epoch_ns:={epoch_ns}', '-p', f'seed:={index}',
-        '-p', 'ground_truth_topic:=ball/ground_truth', '-p', 'diagnostics_period_s:=0.5',
-        '--log-level', 'warn']) for index, name in enumerate(names)]
+        '-p', 'ground_truth_topic:=ball/ground_truth', '-p', 'diagnostics_period_s:=0.5']
+        + ([] if warm_up_s is None else ['-p', f'warm_up_s:={float(warm_up_s)}'])
+        + ['--log-level', 'warn']) for index, name in enumerate(names)]
     code = ('import sys\n'
             'from pseudo_stereo_ros.ros.bench_pipeline import hop_probe_main\n'
             'sys.exit(hop_probe_main())\n')
@@ -574,16 +577,18 @@ def _diagnostic_row(label: str, values: dict, key: str, *, target_ms: Optional[f
             f'{"":>8s}  p99 {p99:.3f}').rstrip()
 
 
-def print_camera_detector_rows(seconds: float) -> int:
+def print_camera_detector_rows(seconds: float, *, warm_up_s: Optional[float] = None) -> int:
     """
     Run :func:`bench_camera_detectors` and print its rows and where the time goes.
 
     :param seconds: measured time [s]
+    :param warm_up_s: the camera_detectors' ``warm_up_s``; None for the node's default
     :return: exit status: 1 when nothing arrived
     """
-    result = bench_camera_detectors(seconds)
+    result = bench_camera_detectors(seconds, warm_up_s=warm_up_s)
     positions, points, hop = result['positions'], result['points'], result['hop']
-    print('camera_detector processes (virtual source, 2 x 30 fps) -> fuser; shutter stamps:')
+    print('camera_detector processes (virtual source, 2 x 30 fps) -> fuser; shutter stamps'
+          + ('' if warm_up_s is None else f'; warm_up_s {warm_up_s:g}') + ':')
     for name, values in sorted(result['diagnostics'].items()):
         print(_diagnostic_row(f'{name}: shutter -> frame available', values,
                               'shutter -> frame available'))
@@ -684,6 +689,11 @@ def main(argv: Optional[List[str]] = None) -> int:
                         ', '.join(f'{k} {v:g}' for k, v in QUICK_RUN.items()))
     parser.add_argument('--skip-end-to-end', action='store_true',
                         help='no separate processes (no DDS discovery needed; no load row)')
+    parser.add_argument('--latency-only', action='store_true',
+                        help='only the camera_detector processes -> fuser block (--seconds)')
+    parser.add_argument('--warm-up-s', type=float, default=None,
+                        help="the camera_detectors' warm_up_s (0: cold, as a camera whose "
+                        "next frame is not predicted); default the node's")
     options = parser.parse_args(argv)
     sizes = QUICK_RUN if options.quick else FULL_RUN
     for key, value in sizes.items():
@@ -704,6 +714,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         rows, status = _load_rows(options.soak, options.executor, soak=True)
         print('\n'.join(rows))
         return status
+    if options.latency_only:
+        return print_camera_detector_rows(options.seconds, warm_up_s=options.warm_up_s)
     detector = bench_detector(options.frames)
     print(_row('detector, full frame', detector['full'], target_ms=TARGETS_MS['full'],
                baseline=detector['baseline']))
@@ -739,7 +751,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             print('  transport baseline: no image received by the probe process')
             status = 1
         sys.stdout.flush()
-        status = max(status, print_camera_detector_rows(options.seconds))
+        status = max(status, print_camera_detector_rows(options.seconds,
+                                                        warm_up_s=options.warm_up_s))
         rows, load_status = _load_rows(options.load_seconds, options.executor, soak=False)
         print('\n'.join(rows))
         status = max(status, load_status)

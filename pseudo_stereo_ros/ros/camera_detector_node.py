@@ -31,12 +31,13 @@ frame available -> image point published.
 Latency: the image point is published before any other work on the frame,
 serialized by :func:`~pseudo_stereo_ros.ros.messages.point_encoder` (a tenth
 of the cost of building a message and having rclpy convert it).
-With ``warm_up_s`` (file and virtual sources, which wait for each frame's
-time) the detector runs once on the previous frame that long before the next
-is due and its result is dropped: after a frame period of sleep the caches
-are cold and a detection costs two to three times more, so this buys about
-0.4 ms per frame with about 0.5 ms of CPU per frame.  OpenCV runs in the
-capture thread alone (``opencv_threads: 1``).
+With ``warm_up_s`` the detector runs once on the previous frame that long
+before the next is due and its result is dropped: after a frame period of
+sleep the caches are cold and a detection costs two to three times more.
+File and virtual sources wait for each frame's time; for a device the next
+frame's arrival is predicted from the driver's stamps (see
+:class:`~pseudo_stereo_ros.capture.CaptureLoop`).  OpenCV runs in the capture
+thread alone (``opencv_threads: 1``).
 """
 
 from collections import Counter, deque
@@ -167,9 +168,10 @@ class CameraDetectorNode(Node):
         retry_max_s = declare(self, 'retry_max_s', 2.0, 'longest wait between retries [s]',
                               min_value=0.001, read_only=True)
         warm_up_s = declare(self, 'warm_up_s', 0.002,
-                            'file and virtual: run the detector on the previous frame this '
-                            'long before the next is due, to warm the caches [s]; 0: never',
-                            min_value=0.0, max_value=0.1, read_only=True)
+                            'run the detector on the previous frame this long before the next '
+                            "is due (device: predicted from the driver's stamps), to warm the "
+                            'caches [s]; 0: never', min_value=0.0, max_value=0.1,
+                            read_only=True)
         opencv_threads = declare(self, 'opencv_threads', 1,
                                  "OpenCV's worker threads in this process (cv2.setNumThreads); "
                                  '1: detection runs in the capture thread alone; 0: leave '
