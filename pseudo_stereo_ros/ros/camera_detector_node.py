@@ -157,8 +157,12 @@ class CameraDetectorNode(Node):
                                      min_value=0, read_only=True)
         self.wait_for_subscribers_s = declare(
             self, 'wait_for_subscribers_s', 0.0,
-            'before the first frame, wait up to this long for a ball/image_point subscriber [s]',
+            'before the first frame, wait up to this long for min_subscribers ball/image_point '
+            'subscribers (matched by DDS, not only in the graph) [s]',
             min_value=0.0, read_only=True)
+        self.min_subscribers = declare(self, 'min_subscribers', 1,
+                                       'subscribers wait_for_subscribers_s waits for',
+                                       min_value=1, read_only=True)
         report_period_s = declare(self, 'report_period_s', 1.0,
                                   'least time between reports of a failing source [s]',
                                   min_value=0.01, read_only=True)
@@ -303,7 +307,7 @@ class CameraDetectorNode(Node):
     def _run(self) -> None:
         try:
             deadline = time.monotonic() + self.wait_for_subscribers_s
-            while (self._point_pub.get_subscription_count() == 0
+            while (self._point_pub.get_subscription_count() < self.min_subscribers
                    and time.monotonic() < deadline and not self._stop.is_set()):
                 self._stop.wait(0.01)
             if self.capture_loop.run(self._stop) == 'ended':
