@@ -821,9 +821,12 @@ class CaptureLoop:
         if steps[-1] - steps[0] > self.warm_up_s * 1e9:
             return False
         latency = min(available - stamp for stamp, available in arrivals)
-        due_ns = stamps[-1] + steps[len(steps) // 2] + latency
+        step = steps[len(steps) // 2]
+        due_ns = stamps[-1] + step + latency
         lead_s = (due_ns - self.system_ns()) / 1e9
-        if lead_s <= self.warm_up_s:
+        # Beyond the prediction's own horizon (one period and the latency) the system clock
+        # was stepped back (NTP): no warm-up rather than a wait for the size of the step.
+        if not self.warm_up_s < lead_s <= (step + max(latency, 0)) / 1e9 + self.warm_up_s:
             return False
         if stop.wait(lead_s - self.warm_up_s):
             return True

@@ -194,7 +194,8 @@ _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 # Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
 # rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
 _AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
-# Frames kept (room for late observations).
+# Frames kept at least (room for late observations); a rig of many cameras keeps four times its
+# longest window (the store is compacted when full and must hold that window and more).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
@@ -208,7 +209,10 @@ _ACCELERATION = np.array((2, 5, 8))
 _FIXED_ACCELERATIONS = np.array(((0.0, 0.0), (0.0, 0.0),
                                  (0.0, -0.5 * GRAVITY_MPS2 * (_SCALE_NS * 1e-9) ** 2)))
 _FIXED_LIST = _FIXED_ACCELERATIONS.T.tolist()  # per model: (x, y, z)
-# Fewest frames of a window whose velocity fit may replace the acceleration fit.
+# Fewest frames of a window whose velocity fit may replace the acceleration fit. Like the
+# support counts below it is a count of equations, not a time span, so it does not grow with
+# the number of cameras as the windows do (more cameras reach it sooner, which is the point:
+# it guards the statistics of the order test, not the window's length in time).
 _CV_SELECT_MIN = 13
 # Chi-square bound (3 d.o.f.) of a velocity fit's disagreement with the acceleration fit.
 _ORDER_CONSISTENCY = 12.0
@@ -480,17 +484,18 @@ class TrajectoryFuser(GatedEstimator):
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
         self._depth = np.full(len(cameras), max(baseline, 1e-3))
         # Frame store, time-ordered in [_start, _end).
-        self._stamp = np.zeros(_CAPACITY, dtype=np.int64)
-        self._camera = np.zeros(_CAPACITY, dtype=np.int64)
-        self._rows = np.zeros((_CAPACITY, 2, 3))
-        self._rhs = np.zeros((_CAPACITY, 2))
-        self._weight = np.ones(_CAPACITY)
+        self._capacity = capacity = max(_CAPACITY, 4 * int(self._windows[-1]))
+        self._stamp = np.zeros(capacity, dtype=np.int64)
+        self._camera = np.zeros(capacity, dtype=np.int64)
+        self._rows = np.zeros((capacity, 2, 3))
+        self._rhs = np.zeros((capacity, 2))
+        self._weight = np.ones(capacity)
         # Prefix sums of each frame's augmented normal matrix (the normal matrix and the
         # moment together: the design's rows extended by the right-hand side, see _AUGMENTED)
         # in the coefficients of a fixed reference stamp (_reference): a window's system is a
         # difference of two prefixes, moved to the event's time by a linear map (see _fit).
         # [i] sums frames [_start, i).
-        self._prefix = np.zeros((_CAPACITY + 1, 13, 13))
+        self._prefix = np.zeros((capacity + 1, 13, 13))
         # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
         # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
         self._shift = {9: np.eye(10), 12: np.eye(13)}
@@ -634,7 +639,7 @@ class TrajectoryFuser(GatedEstimator):
         """Insert a frame in time order and forget frames beyond the longest window."""
         stamp, index, rows, rhs, weight = frame
         rebuild = None
-        if self._end == _CAPACITY:
+        if self._end == self._capacity:
             count = self._end - self._start
             for array in self._arrays():
                 array[:count] = array[self._start:self._end].copy()
@@ -898,7 +903,7 @@ class TrajectoryFuser(GatedEstimator):
     def _confirm_break(self, frame: _Frame) -> bool:
         """Test an impact between the last consistent frames and the pending one."""
         pending = self._pending
-        assert pending is not None, '_check confirms an impact only with a pending detection'
+        assert pending is not None, 'an impact is confirmed only with a pending detection'
         start, end = self._start, self._end
         first = start  # frames after an earlier impact only: one jump per window
         if self._break is not None:
@@ -1078,32 +1083,18 @@ class TrajectoryFuser(GatedEstimator):
             # The model's order, from the longest window: a constant velocity or a free fall
             # where its acceleration does not differ significantly from theirs.
             model = self._lower_model(*self._full(*solutions[longest]), sigma2)
-        if model is None:
+        lower = None
+        if model is not None:
+            try:
+                lower = self._lower_choice(solutions, longest, model, position, sigma2)
+            except np.linalg.LinAlgError:  # a shorter window's acceleration block is singular
+                lower = None
+        if lower is None:
             chosen = self._lepski(points, covariances, sigma2, self.consistency)
             beta, inverse = self._full(*solutions[chosen])
             point, covariance = points[chosen], covariances[chosen]
         else:
-            # The window among that model's fits (its variance is far smaller than a
-            # parabola's at a short window's end, so a noisy short fit stops the rule less
-            # often and costs less when it does).
-            if isinstance(solutions, _Solutions):  # one stack: all windows at once
-                stacks = [(solutions.betas, solutions.inverses)]
-            else:  # windows with and without an impact's jump (9 or 12 unknowns)
-                stacks = []
-                for k in range(longest + 1):
-                    full_beta, full_inverse = self._full(*solutions[k])
-                    stacks.append((full_beta[None], full_inverse[None]))
-            lowers: list[tuple[np.ndarray, np.ndarray]] = []
-            points, covariances = [], []
-            for betas, inverses in stacks:
-                betas, inverses = self._lower_order(betas, inverses, model)
-                selector = position[:, :betas.shape[1]]
-                points += (betas @ selector.T).tolist()
-                covariances += (selector @ inverses @ selector.T).tolist()
-                lowers += zip(betas, inverses)
-            chosen = self._lepski(points, covariances, sigma2, _LOWER_CONSISTENCY)
-            beta, inverse = lowers[chosen]
-            point, covariance = points[chosen], covariances[chosen]
+            beta, inverse, point, covariance = lower
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -1153,6 +1144,36 @@ class TrajectoryFuser(GatedEstimator):
         if not 0.0 < statistics[best] <= _ORDER_CONSISTENCY * sigma2:
             return None  # (zero: a singular covariance)
         return best
+
+    def _lower_choice(self, solutions: _Solutions | list[_Solution], longest: int, model: int,
+                      position: np.ndarray, sigma2: float) -> tuple:
+        """
+        Return the window among the lower-order model's fits: its beta, inverse, point, covariance.
+
+        The model's variance is far smaller than a parabola's at a short window's end, so a
+        noisy short fit stops Lepski's rule less often and costs less when it does.
+
+        :raises np.linalg.LinAlgError: a window's acceleration block is singular
+        """
+        if isinstance(solutions, _Solutions):  # one stack: all windows at once
+            stacks = [(solutions.betas, solutions.inverses)]
+        else:  # windows with and without an impact's jump (9 or 12 unknowns)
+            stacks = []
+            for k in range(longest + 1):
+                full_beta, full_inverse = self._full(*solutions[k])
+                stacks.append((full_beta[None], full_inverse[None]))
+        lowers: list[tuple[np.ndarray, np.ndarray]] = []
+        points: list = []
+        covariances: list = []
+        for betas, inverses in stacks:
+            betas, inverses = self._lower_order(betas, inverses, model)
+            selector = position[:, :betas.shape[1]]
+            points += (betas @ selector.T).tolist()
+            covariances += (selector @ inverses @ selector.T).tolist()
+            lowers += zip(betas, inverses)
+        chosen = self._lepski(points, covariances, sigma2, _LOWER_CONSISTENCY)
+        beta, inverse = lowers[chosen]
+        return beta, inverse, points[chosen], covariances[chosen]
 
     @staticmethod
     def _lower_order(betas: np.ndarray, inverses: np.ndarray,

@@ -525,6 +525,28 @@ class DriverPacedSource:
                      k, self.stamp_source)
 
 
+def test_device_warm_up_never_waits_for_a_clock_step():
+    # The prediction is in system time (driver stamps mapped to it): when the system clock is
+    # stepped back (NTP at boot), the next frame seems seconds away. No warm-up then, and no
+    # wait: frames keep coming at the camera's rate.
+    clock = [0.0]
+    source = DriverPacedSource(clock)
+    step = {'ns': 0}
+    frames = []
+
+    def on_frame(frame):
+        frames.append(frame)
+        if len(frames) == 30:
+            step['ns'] = -5_000_000_000
+
+    loop = CaptureLoop(source, on_frame, warm_up=lambda: None, warm_up_s=0.002,
+                       clock=lambda: clock[0], system_ns=lambda: int(clock[0] * 1e9) + step['ns'])
+    stop = FakeStop(clock, until_s=3.0)
+    loop.run(stop)
+    assert max(stop.waits) < 0.05
+    assert len(frames) >= 80  # 30 fps for 3 s, none lost to a wait
+
+
 @pytest.mark.parametrize('stamp_source', ['driver', 'read time'])
 def test_device_warm_up_comes_before_the_predicted_frame_and_delays_none(stamp_source):
     # A device blocks in read(): the loop predicts the next arrival from the driver's stamps
@@ -535,7 +557,12 @@ def test_device_warm_up_comes_before_the_predicted_frame_and_delays_none(stamp_s
     # The latency varies by 3 ms, more than warm_up_s: only the shortest one is safe to use.
     source = DriverPacedSource(clock, stamp_source=stamp_source, extra_s=0.003)
     frames, warm_ups = [], []
-    loop = CaptureLoop(source, frames.append, warm_up=lambda: warm_ups.append(clock[0]),
+
+    def warm_up():  # takes the time a windowed detection takes
+        warm_ups.append(clock[0])
+        clock[0] += 0.0005
+
+    loop = CaptureLoop(source, frames.append, warm_up=warm_up,
                        warm_up_s=0.002, clock=lambda: clock[0],
                        system_ns=lambda: int(clock[0] * 1e9))
     stop = FakeStop(clock, until_s=2.0)

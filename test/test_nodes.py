@@ -26,7 +26,7 @@ from pseudo_stereo_ros.fusion import fuse
 from pseudo_stereo_ros.records import Observation
 from pseudo_stereo_ros.ros import bringup
 from pseudo_stereo_ros.ros.detector_node import DetectorNode
-from pseudo_stereo_ros.ros.fuser_node import FuserNode
+from pseudo_stereo_ros.ros.fuser_node import FuserNode, INPUT_QUEUE_DEPTH
 from pseudo_stereo_ros.ros.messages import (array_to_image, estimate_to_point, image_to_array,
                                             observation_to_point, point_to_xyz, stamp_to_ns)
 from pseudo_stereo_ros.ros.monitor_node import MonitorNode
@@ -95,15 +95,16 @@ def _feed_points(harness, observations, received, *, burst=False):
                                           publishers.values()))
     fuser = harness.nodes[0]
 
-    def taken():  # every message the fuser took: observations and malformed ones
-        return fuser.fuser.stats['observations'] + fuser.node_stats['malformed']
+    def taken():  # every message the fuser took: observations, malformed ones, failed ones
+        return (fuser.fuser.stats['observations'] + fuser.node_stats['malformed']
+                + fuser.node_stats['internal_error'])
 
     for count, observation in enumerate(observations, 1):
         if isinstance(observation, Observation):
             publishers[observation.camera].publish(observation_to_point(observation))
         else:  # (camera, bytes): published as they are
             publishers[observation[0]].publish(observation[1])
-        # Bursts of at most 50: half the fuser's subscription depth, whatever the scenario.
+        # Bursts of at most 50 points, whatever the scenario.
         if not burst or count % 50 == 0:
             assert harness.spin_until(lambda: taken() >= count)
     assert harness.spin_until(lambda: taken() >= len(observations))
@@ -538,6 +539,46 @@ def test_fuser_node_drops_malformed_messages_and_counts_them(context, namespace)
                                rtol=0, atol=1e-9)
     assert fuser.node_stats['malformed'] == values['dropped: malformed message'] == 3
     assert values['estimates'] + _drops(values) - 3 == len(observations)
+
+
+@pytest.mark.parametrize('depth', [None, 7])
+def test_fuser_qos_depth_reaches_its_subscriptions(context, namespace, depth):
+    overrides = [] if depth is None else [Parameter('qos_depth', value=depth)]
+    fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=overrides)
+    try:
+        depths = {s.topic_name: s.qos_profile.depth for s in fuser.subscriptions
+                  if s.topic_name.endswith('/ball/image_point')}
+    finally:
+        fuser.destroy_node()
+    assert len(depths) == 2
+    assert set(depths.values()) == {INPUT_QUEUE_DEPTH if depth is None else depth}
+
+
+def test_fuser_node_survives_a_method_that_fails_on_a_point(context, namespace):
+    # A bug in a method (an exception from update) must not end the node: that point is
+    # dropped and counted, the others are fused.
+    cameras, _, observations = _observations()
+    fuser = FuserNode(context=context, namespace=namespace)
+    bad_stamp = observations[len(observations) // 2].stamp_ns
+    update = fuser.fuser.update
+
+    def failing(observation):
+        if observation.stamp_ns == bad_stamp:
+            raise IndexError('index 256 is out of bounds')
+        return update(observation)
+
+    fuser.fuser.update = failing
+    harness = Harness(context, namespace, fuser)
+    try:
+        received = _positions_subscription(harness)
+        _feed_points(harness, observations, received)
+        harness.spin_for(0.05)
+    finally:
+        harness.close()
+    assert fuser.node_stats['internal_error'] == 1
+    stamps = [r[0] for r in received]
+    assert bad_stamp not in stamps and stamps == sorted(stamps)
+    assert len(received) >= len(observations) - 5  # all but the warm-up and the failed point
 
 
 def test_bringup_real_refuses_the_simulated_calibration(capsys, tmp_path):

@@ -19,7 +19,7 @@ Publishes serialized PointStamped messages (``messages.point_encoder``, as
 the camera_detector does) at a camera's pace and prints the wall and CPU
 time of each ``publish()`` call (median, p90) and the hop to a subscriber
 process (stamp at publication -> its callback).  QoS as ``rel-100``
-(reliable, keep last 100: the camera_detector's and the fuser's),
+(reliable, keep last 100: the camera_detector's; the fuser's is 1,000),
 ``be-1`` (best effort, keep last 1), ...; ``none`` for no subscriber.
 Fast DDS options go in the environment (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``,
 ``RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS``).  Example::

@@ -56,7 +56,8 @@ class DetectorNode(Node):
         #: Seconds spent in the detector per image, the most recent ones (for benchmarks).
         self.detect_times_s = deque(maxlen=10_000)
         self._last_error = {}
-        self._publisher = self.create_publisher(PointStamped, 'ball/image_point', 10)
+        # 100 like camera_detector: points a stalled fuser process has not acknowledged yet.
+        self._publisher = self.create_publisher(PointStamped, 'ball/image_point', 100)
         self._subscription = self.create_subscription(
             Image, 'image_raw', self._on_image, qos_profile_sensor_data)
 

@@ -28,9 +28,12 @@ looping, a restarted clock, one camera's bad stamp) bypasses the reorder
 buffer and goes to the core, which holds it until the cameras agree on the
 jump or drops it as that camera's ``stamp_outlier``; when the core starts a
 new session, the reorder buffer and the timing statistics start afresh.
-A point older than the newest fused one by more than ``max_gap_s`` (a
-replayed bag looping, a restarted clock) starts a new session: the reorder
-buffer and the timing statistics start afresh, as the core fuser does.
+
+Points are taken as serialized bytes (``raw=True``) and read by
+:func:`~pseudo_stereo_ros.ros.messages.decode_point`; bytes that are no
+``PointStamped`` are dropped and counted (``malformed``), and a point a method
+fails on is dropped, logged and counted (``internal_error``): the node never
+dies on a message.
 
 Time offsets (:mod:`pseudo_stereo_ros.timesync`): each point's stamp is
 shifted by its camera's offset (``time_offset_s`` of its calibration file, or
@@ -72,8 +75,9 @@ from ..trajectory import DEFAULT_MAX_WINDOW_S
 
 __all__ = ['FuserNode', 'INPUT_QUEUE_DEPTH', 'main']
 
-#: Default depth of the image point subscriptions: half a second at 2 x 1,000 Hz (100 lost
-#: points whenever the node's core was taken for more than 50 ms at that rate).
+#: Default depth of each image point subscription: one second of a 1,000 Hz camera (100 was
+#: 100 ms). It holds points while the node's Python thread waits for the core; when the whole
+#: process is stalled, the publisher's own keep-last depth bounds what DDS can still deliver.
 INPUT_QUEUE_DEPTH = 1000
 
 
@@ -205,7 +209,8 @@ class FuserNode(Node):
         self.buffer = ReorderBuffer(self._window_ns, sources=self._names)
         #: Counts: ``late`` (points older than one already fused, over all sessions),
         #: ``sessions`` (new sessions the core started: stamps jumped, or the rig paused),
-        #: ``malformed`` (messages that are not a serialized PointStamped: dropped).
+        #: ``malformed`` (messages that are not a serialized PointStamped: dropped),
+        #: ``internal_error`` (points the method failed on, a bug: dropped, logged).
         self.node_stats = Counter()
         #: Seconds from a point's arrival to its estimate's publication (no hold), recent ones.
         self.processing_times_s = deque(maxlen=10_000)
@@ -394,7 +399,16 @@ class FuserNode(Node):
             self.node_stats['sessions'] += 1
 
     def _process(self, observation: Observation) -> None:
-        estimate = self.fuser.update(observation)
+        try:
+            estimate = self.fuser.update(observation)
+        except Exception as err:  # noqa: B902 -- the outermost handler of one point
+            # A bug in a method must not end the node: drop the point, say so, keep fusing.
+            estimate = None
+            self.node_stats['internal_error'] += 1
+            self.get_logger().error(
+                f'{observation.camera}: point stamped {observation.stamp_ns} ns dropped: '
+                f'{type(err).__name__}: {err} (a bug in method {self.fuser.method!r}: please '
+                f'report it)', throttle_duration_sec=1.0)
         if estimate is not None:
             self._position_pub.publish(self._encode_position(estimate.stamp_ns, estimate.x,
                                                              estimate.y, estimate.z))
@@ -455,7 +469,11 @@ class FuserNode(Node):
         values['late (older than a fused point, after the reorder window)'] = \
             self.node_stats['late']
         values['new sessions (time jumped or paused)'] = self.node_stats['sessions']
+        # Outside the core's counts: a malformed message never became an observation, and a
+        # point the method failed on has no drop reason there. So estimates + every 'dropped:'
+        # value = observations + malformed messages.
         values['dropped: malformed message'] = self.node_stats['malformed']
+        values['dropped: internal error'] = self.node_stats['internal_error']
         values[f'other publishers of {self._position_pub.topic_name}'] = \
             self.position_watch.others
         inputs = sum(self._inputs.values())
