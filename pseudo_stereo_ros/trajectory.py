@@ -194,7 +194,7 @@ _WINDOWS = np.array((6, 9, 13, 19, 28, 40, 60))
 # Where the 12 coefficients and then the right-hand side are in the prefix sums' augmented
 # rows: x0 .. z2, the right-hand side, the jump (so that the first 10 serve fits without it).
 _AUGMENTED = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 9))
-# Frames kept at least (room for late observations); a rig of many cameras keeps four times its
+# Frames kept at least (room for late observations); a rig of many cameras keeps twice its
 # longest window (the store is compacted when full and must hold that window and more).
 _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
@@ -484,7 +484,7 @@ class TrajectoryFuser(GatedEstimator):
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
         self._depth = np.full(len(cameras), max(baseline, 1e-3))
         # Frame store, time-ordered in [_start, _end).
-        self._capacity = capacity = max(_CAPACITY, 4 * int(self._windows[-1]))
+        self._capacity = capacity = max(_CAPACITY, 2 * int(self._windows[-1]))
         self._stamp = np.zeros(capacity, dtype=np.int64)
         self._camera = np.zeros(capacity, dtype=np.int64)
         self._rows = np.zeros((capacity, 2, 3))
@@ -1093,8 +1093,8 @@ class TrajectoryFuser(GatedEstimator):
             chosen = self._lepski(points, covariances, sigma2, self.consistency)
             beta, inverse = self._full(*solutions[chosen])
             point, covariance = points[chosen], covariances[chosen]
-        else:
-            beta, inverse, point, covariance = lower
+        else:  # the noise estimate below uses the lower-order fits too
+            beta, inverse, point, covariance, points, covariances = lower
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -1148,7 +1148,7 @@ class TrajectoryFuser(GatedEstimator):
     def _lower_choice(self, solutions: _Solutions | list[_Solution], longest: int, model: int,
                       position: np.ndarray, sigma2: float) -> tuple:
         """
-        Return the window among the lower-order model's fits: its beta, inverse, point, covariance.
+        Return the lower-order model's chosen fit (beta, inverse, point, covariance) and all fits.
 
         The model's variance is far smaller than a parabola's at a short window's end, so a
         noisy short fit stops Lepski's rule less often and costs less when it does.
@@ -1173,7 +1173,7 @@ class TrajectoryFuser(GatedEstimator):
             lowers += zip(betas, inverses)
         chosen = self._lepski(points, covariances, sigma2, _LOWER_CONSISTENCY)
         beta, inverse = lowers[chosen]
-        return beta, inverse, points[chosen], covariances[chosen]
+        return beta, inverse, points[chosen], covariances[chosen], points, covariances
 
     @staticmethod
     def _lower_order(betas: np.ndarray, inverses: np.ndarray,
