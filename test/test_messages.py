@@ -21,10 +21,10 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from hypothesis import given, strategies as st
 import numpy as np
-from pseudo_stereo_ros.records import Estimate, Observation
+from pseudo_stereo_ros.records import Estimate, GroundTruth, Observation
 from pseudo_stereo_ros.ros.messages import (
     array_to_image, calibration_to_camera_info, decode_point, diagnostic_array,
-    diagnostic_status, ENCODING_CHANNELS, EncodingError, estimate_to_point, fill_point,
+    diagnostic_status, ENCODING_CHANNELS, EncodingError, estimate_to_point,
     image_point, image_to_array, ns_to_stamp, observation_to_point, point_encoder,
     point_to_observation, point_to_xyz, stamp_to_ns, trail_marker)
 from pseudo_stereo_ros.sim.scenarios import DEFAULT_EPOCH_NS, default_rig
@@ -69,7 +69,7 @@ def test_image_point_keeps_the_image_header():
        xyz=st.tuples(*[st.floats(allow_nan=False, width=64)] * 3))
 def test_encoded_point_is_what_rclpy_serializes(frame_id, stamp_ns, xyz):
     encoded = point_encoder(frame_id)(stamp_ns, *xyz)
-    expected = serialize_message(fill_point(PointStamped(), stamp_ns, frame_id, *xyz))
+    expected = serialize_message(estimate_to_point(GroundTruth(stamp_ns, *xyz), frame_id))
     # Byte for byte but the alignment padding before the doubles (rclpy leaves it unset).
     string_end = 4 + 8 + 4 + len(frame_id.encode()) + 1
     assert len(encoded) == len(expected)
@@ -84,7 +84,7 @@ def test_encoded_point_is_what_rclpy_serializes(frame_id, stamp_ns, xyz):
        stamp_ns=st.integers(0, 2 ** 31 * 10 ** 9 - 1),
        xyz=st.tuples(*[st.floats(allow_nan=False, width=64)] * 3))
 def test_decoded_point_is_what_rclpy_deserializes(frame_id, stamp_ns, xyz):
-    msg = fill_point(PointStamped(), stamp_ns, frame_id, *xyz)
+    msg = estimate_to_point(GroundTruth(stamp_ns, *xyz), frame_id)
     data = serialize_message(msg)
     assert decode_point(data) == point_to_xyz(deserialize_message(data, PointStamped))
     assert decode_point(data) == (stamp_ns, *xyz)
@@ -96,7 +96,7 @@ def test_decoded_point_is_what_rclpy_deserializes(frame_id, stamp_ns, xyz):
 
 
 def test_decoded_point_keeps_non_finite_values_for_the_fuser_to_drop():
-    data = serialize_message(fill_point(PointStamped(), 5, 'c', math.nan, math.inf, -0.0))
+    data = serialize_message(estimate_to_point(GroundTruth(5, math.nan, math.inf, -0.0), 'c'))
     stamp_ns, x, y, z = decode_point(data)
     assert stamp_ns == 5 and math.isnan(x) and y == math.inf and math.copysign(1.0, z) < 0
 
