@@ -87,14 +87,22 @@ __all__ = [
     'DROP_REASONS',
     'Fuser',
     'FuserConfigError',
+    'METHOD_ALIASES',
+    'METHOD_NAMES',
     'METHODS',
     'fuse',
     'make_fuser',
+    'resolve_method',
 ]
 
 #: Every fusion method: the paper's, naive pairing, and the causal trajectory fit
 #: (:mod:`pseudo_stereo_ros.trajectory`).
 METHODS = ('paper', 'naive', 'trajectory')
+#: Other names a user may give a method: ``best`` is the most accurate method (a
+#: configuration asking for ``best`` follows it if another method takes its place).
+METHOD_ALIASES = {'best': 'trajectory'}
+#: Every name :func:`make_fuser`, the ``fuser`` node and the CLI accept.
+METHOD_NAMES = METHODS + tuple(METHOD_ALIASES)
 # The methods of :class:`Fuser` itself.
 _FUSER_METHODS = ('paper', 'naive')
 
@@ -376,6 +384,20 @@ class Fuser(GatedEstimator):
         return point
 
 
+def resolve_method(name: str) -> str:
+    """
+    Return the method a name stands for (itself, or the method an alias names).
+
+    :param name: a name from :data:`METHOD_NAMES`
+    :return: a name from :data:`METHODS`
+    :raises FuserConfigError: an unknown name
+    """
+    method = METHOD_ALIASES.get(name, name)
+    if method not in METHODS:
+        raise FuserConfigError(f'unknown method {name!r} (known: {", ".join(METHOD_NAMES)})')
+    return method
+
+
 def make_fuser(cameras: Sequence[Camera] | Mapping[str, Camera], *,
                method: str = 'paper', sync_tolerance_ns: int | None = None,
                max_gap_ns: int | None = None, image_margin: float | None = None,
@@ -386,7 +408,7 @@ def make_fuser(cameras: Sequence[Camera] | Mapping[str, Camera], *,
     Build the fuser of a method: the one factory of ``track``, holdout, Table 1 and the node.
 
     :param cameras: the calibrated cameras
-    :param method: one of :data:`METHODS`
+    :param method: one of :data:`METHOD_NAMES` (an alias builds the method it names)
     :param sync_tolerance_ns: see :class:`Fuser` [ns]
     :param max_gap_ns: see :class:`Fuser` [ns]
     :param image_margin: see :class:`Fuser` (the shared input rules)
@@ -399,8 +421,7 @@ def make_fuser(cameras: Sequence[Camera] | Mapping[str, Camera], *,
         (``update``, ``process``, ``reset``, ``stats``)
     :raises FuserConfigError: an unknown method or an invalid option
     """
-    if method not in METHODS:
-        raise FuserConfigError(f'unknown method {method!r} (known: {", ".join(METHODS)})')
+    method = resolve_method(method)
     if method not in _FUSER_METHODS:
         # Looked up, not imported: the trajectory module imports this one (the paper
         # method stands in for its first frames).

@@ -139,11 +139,12 @@ def test_fuser_node_equals_core_fuse(context, namespace, burst):
 
 
 def test_fuser_node_trajectory_equals_core_fuse(context, namespace):
-    # method trajectory: the node publishes exactly what make_fuser(...).process gives
-    # (noisy bounces: impacts, pending detections and velocity jumps included).
+    # method best (the alias of trajectory): the node publishes exactly what
+    # make_fuser(method='trajectory').process gives (noisy bounces: impacts, pending
+    # detections and velocity jumps included).
     cameras, _, observations = _observations('bounce', noise_px=0.3)
     fuser = FuserNode(context=context, namespace=namespace,
-                      parameter_overrides=[Parameter('method', value='trajectory')])
+                      parameter_overrides=[Parameter('method', value='best')])
     harness = Harness(context, namespace, fuser)
     try:
         received = _positions_subscription(harness)

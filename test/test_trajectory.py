@@ -262,12 +262,13 @@ def test_a_singular_lower_order_solve_falls_back_to_the_parabolas(monkeypatch):
 
 
 def test_track_cli_equals_fuse(tmp_path):
+    # --method best: the alias of trajectory.
     assert main(['simulate', '--scenario', 'bounce', '--noise', '0.3', '--out',
                  str(tmp_path)]) == 0
     assert main(['track', '--camera', f'camera1={tmp_path / "camera1.yaml"}',
                  '--camera', f'camera2={tmp_path / "camera2.yaml"}',
                  '--input', str(tmp_path / 'observations.csv'),
-                 '--output', str(tmp_path / 'estimates.csv'), '--method', 'trajectory']) == 0
+                 '--output', str(tmp_path / 'estimates.csv'), '--method', 'best']) == 0
     cameras = [Camera.from_file(tmp_path / f'camera{k}.yaml') for k in (1, 2)]
     data = simulate_run(Run('bounce', noise_px=0.3), default_rig())
     expected, _ = fuse(cameras, data.observations, method='trajectory')
@@ -306,6 +307,18 @@ def test_real_data_gross_errors_at_most_twice_the_oracles(lfg_results):
     ours = sum(int(np.sum(r['trajectory'].errors > 20.0)) for r in lfg_results.values())
     oracle = sum(int(np.sum(r['oracle'].errors > 20.0)) for r in lfg_results.values())
     assert ours <= 2 * oracle
+
+
+def test_holdout_scores_best_as_trajectory(lfg):
+    # best is the alias of trajectory: the same errors on the same events, under its name.
+    cameras, data = lfg
+    results = holdout(cameras, data['n3_p1_v14'], methods=('best', 'trajectory'))
+    result, expected = results['best'], results['trajectory']
+    assert result.method == 'best' and result.available == expected.available > 80
+    assert np.array_equal(result.errors, expected.errors)
+    assert isinstance(make_fuser(list(cameras.values())[:2], method='best'), TrajectoryFuser)
+    with pytest.raises(FuserConfigError, match="unknown method 'kalman' .*best"):
+        make_fuser(list(cameras.values())[:2], method='kalman')
 
 
 def test_real_data_three_cameras_consistent_with_two(lfg, lfg_results):

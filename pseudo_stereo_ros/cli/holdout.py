@@ -31,6 +31,7 @@ from . import UsageError
 from .common import add_camera_argument, cameras_from_args, seconds_to_ns
 from ..evaluation.holdout import holdout, HOLDOUT_METHODS, three_camera_consistency
 from ..formats.bagio import read_observations
+from ..fusion import METHOD_ALIASES
 from ..offsets import apply_time_offsets, camera_time_offsets
 
 NAME = 'holdout'
@@ -50,7 +51,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--held-out', default='camera_3', metavar='CAMERA',
                         help='the camera that judges (default: camera_3)')
     parser.add_argument('--methods', nargs='+', default=list(HOLDOUT_METHODS),
-                        choices=HOLDOUT_METHODS, help='methods to score (default: all)')
+                        choices=HOLDOUT_METHODS + tuple(METHOD_ALIASES),
+                        help='methods to score (default: all; best: trajectory)')
     parser.add_argument('--sync-tolerance', type=float, default=None, metavar='S',
                         help="the fuser's sync tolerance [s] (default: the fuser's)")
     parser.add_argument('--three-cameras', action='store_true',

@@ -44,7 +44,7 @@ from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUT
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..formats.yaml_io import read_yaml
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_MAX_SPEED_MPS,
-                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser, METHODS)
+                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser, METHOD_NAMES)
 from ..offsets import apply_time_offsets, camera_time_offsets
 from ..records import Observation
 
@@ -73,7 +73,7 @@ def add_arguments(parser) -> None:
                         help='estimates with header stamp_ns,camera,x,y,z, in stamp order')
     parser.add_argument('--output-bag', metavar='OUT',
                         help='a new bag (mcap) with the estimates on /ball/position')
-    parser.add_argument('--method', choices=METHODS, default='paper')
+    parser.add_argument('--method', choices=METHOD_NAMES, default='paper')
     parser.add_argument('--time-offset', action='append', default=[], metavar='NAME=SECONDS',
                         help="add SECONDS to camera NAME's stamps (overrides the time_offset_s "
                              'of its calibration file; repeat per camera)')

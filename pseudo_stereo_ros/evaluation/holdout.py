@@ -48,7 +48,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import UsageError
-from ..fusion import DEFAULT_MAX_GAP_NS, fuse
+from ..fusion import DEFAULT_MAX_GAP_NS, fuse, METHOD_ALIASES
 from ..geometry import triangulate_rays
 from ..records import Observation
 
@@ -249,7 +249,8 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
     :param observations: observations of all three cameras, any order
     :param inputs: the two input camera names
     :param held_out: the held-out camera name
-    :param methods: names from :data:`HOLDOUT_METHODS`
+    :param methods: names from :data:`HOLDOUT_METHODS` or aliases
+        (:data:`~.fusion.METHOD_ALIASES`; a result keeps the name it was asked by)
     :param sync_tolerance_ns: the fuser's option (its default when None)
     :param max_gap_ns: the fuser's option, also the longest interpolation span here
     :param method_options: method -> options of its fuser (see :func:`~.fusion.make_fuser`)
@@ -263,7 +264,7 @@ def holdout(cameras: Mapping[str, Camera], observations: Sequence[Observation], 
         raise UsageError(f'need two distinct input cameras and another held-out camera, got '
                          f'inputs {inputs} and held-out {held_out!r}')
     for method in methods:
-        if method not in HOLDOUT_METHODS:
+        if METHOD_ALIASES.get(method, method) not in HOLDOUT_METHODS:
             raise UsageError(f'unknown method {method!r} (known: {", ".join(HOLDOUT_METHODS)})')
     gap = DEFAULT_MAX_GAP_NS if max_gap_ns is None else int(max_gap_ns)
     rows = sorted((o.stamp_ns, o.u, o.v) for o in observations if o.camera == held_out)

@@ -54,7 +54,7 @@ from .node_tools import (check_params_files, close, DEFAULT_EXECUTOR, EXECUTORS,
                          spin, STARTUP_ERRORS)
 from ..cli.common import name_values
 from ..errors import RigError
-from ..fusion import METHODS
+from ..fusion import METHOD_NAMES
 from ..rig import check_camera_name, config_dir
 from ..sim.scenarios import SCENARIOS
 
@@ -93,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
                              'file) [s]; default: shutters spread evenly')
     parser.add_argument('--scenario', choices=sorted(SCENARIOS), default=None,
                         help='trajectory of the virtual cameras (default: the params file)')
-    parser.add_argument('--method', choices=METHODS, default=None,
+    parser.add_argument('--method', choices=METHOD_NAMES, default=None,
                         help='fusion method (default: the params file)')
     parser.add_argument('--params-file', default=None,
                         help='ROS parameter file (default: config/bringup.yaml)')

@@ -65,7 +65,7 @@ from .node_tools import declare, load_cameras, PublisherWatch, run_node, Startup
 from .processes import offset_worker
 from ..errors import EncodingError, PseudoStereoError
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, make_fuser,
-                      METHODS)
+                      METHOD_NAMES, resolve_method)
 from ..offsets import camera_time_offsets, shift_observation
 from ..records import Observation
 from ..reorder import ReorderBuffer
@@ -103,8 +103,9 @@ class FuserNode(Node):
         files = declare(self, 'calibration_files', [''],
                         'calibration YAML per camera, same order; [""]: config/rig/<name>.yaml',
                         read_only=True)
-        method = declare(self, 'method', 'paper', 'fusion method', choices=METHODS,
-                         read_only=True)
+        method = resolve_method(declare(
+            self, 'method', 'paper', 'fusion method (best: the most accurate, now trajectory)',
+            choices=METHOD_NAMES, read_only=True))
         self.world_frame = declare(self, 'world_frame', 'world',
                                    'frame_id of /ball/position and the marker')
         sync_s = declare(self, 'sync_tolerance_s', 0.001,
