@@ -340,6 +340,36 @@ _POSITION = _position_row(0, None)
 _POSITION.flags.writeable = False
 
 
+def _raise_singular(error: str, flag: int) -> None:
+    """Raise numpy's error for a singular matrix (the call of :func:`_inverses`' errstate)."""
+    raise np.linalg.LinAlgError('Singular matrix')
+
+
+try:  # the LAPACK routine np.linalg.inv calls, without its per-call Python layer
+    from numpy.linalg import _umath_linalg
+    _GUFUNC_INV = _umath_linalg.inv
+except (ImportError, AttributeError):  # pragma: no cover (numpy 1.26 to 2.4 have it)
+    _GUFUNC_INV = None
+
+
+def _inverses(matrices: np.ndarray) -> np.ndarray:
+    """
+    Return ``np.linalg.inv(matrices)`` for a stack of float64 matrices, the same floats.
+
+    The routine numpy's own ``inv`` calls, under the same error state (a singular matrix
+    raises ``LinAlgError``; overflow, division and underflow are ignored), without the
+    wrapper's type and shape checks (a few microseconds per event).
+
+    :param matrices: (K, m, m) float64
+    :raises np.linalg.LinAlgError: a matrix is singular
+    """
+    if _GUFUNC_INV is None:  # pragma: no cover
+        return np.linalg.inv(matrices)
+    with np.errstate(call=_raise_singular, invalid='call', over='ignore', divide='ignore',
+                     under='ignore'):
+        return _GUFUNC_INV(matrices, signature='d->d')
+
+
 def _sizes(count: int, windows: np.ndarray) -> np.ndarray:
     """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
     key = (count, int(windows[-1]))
@@ -496,9 +526,13 @@ class TrajectoryFuser(GatedEstimator):
         # difference of two prefixes, moved to the event's time by a linear map (see _fit).
         # [i] sums frames [_start, i).
         self._prefix = np.zeros((capacity + 1, 13, 13))
+        # Their leading 10 x 10 blocks (the fits without an impact), contiguous: a window's
+        # system is then one subtraction of contiguous blocks, ready to multiply.
+        self._prefix10 = np.zeros((capacity + 1, 10, 10))
         # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
         # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
         self._shift = {9: np.eye(10), 12: np.eye(13)}
+        self._shift_t = {9: np.eye(10), 12: np.eye(13)}  # their transposes, contiguous
         # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
         self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
                                for rotation in self._rotation]
@@ -697,6 +731,7 @@ class TrajectoryFuser(GatedEstimator):
                  b0 * jump * w if jump else 0.0, b1 * jump * w if jump else 0.0,
                  b2 * jump * w if jump else 0.0)))
             np.add(prefix[first], design.T @ design, out=prefix[end])
+            self._prefix10[end] = prefix[end, :10, :10]
             return
         if first == self._start:
             prefix[first] = 0.0
@@ -710,6 +745,7 @@ class TrajectoryFuser(GatedEstimator):
         design *= weight
         np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
         prefix[first + 1:end + 1] += prefix[first]
+        self._prefix10[first:end + 1] = prefix[first:end + 1, :10, :10]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -1037,18 +1073,24 @@ class TrajectoryFuser(GatedEstimator):
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
-        shift = self._shift[unknowns]
-        shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
-        shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
-        shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
-        prefix = self._prefix
+        shift, shift_t = self._shift[unknowns], self._shift_t[unknowns]
+        shift[0, 1] = shift[3, 4] = shift[6, 7] = shift_t[1, 0] = shift_t[4, 3] = \
+            shift_t[7, 6] = -delta
+        shift[0, 2] = shift[3, 5] = shift[6, 8] = shift_t[2, 0] = shift_t[5, 3] = \
+            shift_t[8, 6] = delta * delta
+        shift[1, 2] = shift[4, 5] = shift[7, 8] = shift_t[2, 1] = shift_t[5, 4] = \
+            shift_t[8, 7] = -2.0 * delta
         previous = end - sizes
-        systems = prefix[end] - prefix.take(previous, axis=0)
-        # The unknowns first, the right-hand side last.
-        systems = systems[:, :10, :10] if t_break is None else \
-            systems[:, _AUGMENTED[:, None], _AUGMENTED]
-        # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
-        systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
+        # The unknowns first, the right-hand side last.  (A contiguous stack: numpy 1.26 and
+        # 2.x then multiply it the same way, bit for bit.)
+        if t_break is None:
+            prefix = self._prefix10
+            systems = prefix[end] - prefix.take(previous, axis=0)
+        else:
+            prefix = self._prefix
+            systems = np.ascontiguousarray((prefix[end] - prefix.take(previous, axis=0))[
+                :, _AUGMENTED[:, None], _AUGMENTED])
+        systems = np.matmul(np.matmul(shift_t, systems), shift)
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = _POSITION if t_break is None else _position_row(0, stamp - t_break)
         kept: _Fits | None = None
@@ -1260,7 +1302,7 @@ class TrajectoryFuser(GatedEstimator):
         if first:
             sizes, matrices, moments = sizes[first:], matrices[first:], moments[first:]
         try:
-            inverses = np.linalg.inv(matrices)
+            inverses = _inverses(matrices)
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
