@@ -499,6 +499,7 @@ class TrajectoryFuser(GatedEstimator):
         # Window sizes [frames]: each camera contributes as many frames as in a pair's windows
         # (more cameras must not shorten the windows' time spans).
         self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
+        self._shortest, self._longest = int(self._windows[0]), int(self._windows[-1])
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -644,7 +645,7 @@ class TrajectoryFuser(GatedEstimator):
             if predicted > 0.0:
                 depth = predicted
         frame: _Frame = (stamp, index, np.array(equations[:2]), np.array(equations[2]),
-                         self._focal[index] / depth)
+                         self._focal_list[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
@@ -692,7 +693,7 @@ class TrajectoryFuser(GatedEstimator):
         self._rhs[position] = rhs
         self._weight[position] = weight
         self._end = end = end + 1
-        start = max(self._start, end - int(self._windows[-1]))
+        start = max(self._start, end - self._longest)
         newest = int(self._stamp[end - 1])
         oldest = newest - self.max_window_ns
         stamps = self._stamp
@@ -1068,7 +1069,7 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= self._windows[0]
+        quadratic = self.order == 2 and count >= self._shortest
         sizes = _sizes(count, self._windows) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
@@ -1295,12 +1296,12 @@ class TrajectoryFuser(GatedEstimator):
             selector = position[:, columns]
             picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
-        first = 0 if len(sizes) and sizes[0] > count // 2 else \
-            int(sizes.searchsorted(count // 2, side='right'))
-        if first == len(sizes):
+        kept = sizes.tolist()
+        first = 0 if kept and kept[0] > count // 2 else bisect.bisect_right(kept, count // 2)
+        if first == len(kept):
             return None
         if first:
-            sizes, matrices, moments = sizes[first:], matrices[first:], moments[first:]
+            kept, matrices, moments = kept[first:], matrices[first:], moments[first:]
         try:
             inverses = _inverses(matrices)
         except np.linalg.LinAlgError:
@@ -1319,7 +1320,7 @@ class TrajectoryFuser(GatedEstimator):
             covariances = inverses[:, :3 * picks:picks, :3 * picks:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
-        limit = self.max_uncertainty / self._focal[index]
+        limit = self.max_uncertainty / self._focal_list[index]
         limit2 = limit * limit
         (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
         good = []
@@ -1330,7 +1331,6 @@ class TrajectoryFuser(GatedEstimator):
                 good.append(k)
         if not good:
             return None
-        kept = sizes.tolist()
         if len(good) < len(kept):
             kept = [kept[k] for k in good]
             points = [points[k] for k in good]
