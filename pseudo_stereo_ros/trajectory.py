@@ -350,6 +350,12 @@ try:  # the LAPACK routine np.linalg.inv calls, without its per-call Python laye
     _GUFUNC_INV = _umath_linalg.inv
 except (ImportError, AttributeError):  # pragma: no cover (numpy 1.26 to 2.4 have it)
     _GUFUNC_INV = None
+# numpy 1.x: that error state as the ufunc's ``extobj``, as numpy 1.26's own ``inv`` passes it
+# (its ``np.errstate`` costs ~5 us); numpy 2 has no ``extobj`` and a cheap ``np.errstate``.
+_EXTOBJ: list | None = None
+if _GUFUNC_INV is not None and hasattr(np, 'geterrobj'):  # pragma: no cover (numpy 1.x)
+    with np.errstate(invalid='call', over='ignore', divide='ignore', under='ignore'):
+        _EXTOBJ = np.geterrobj()[:2] + [_raise_singular]
 
 
 def _inverses(matrices: np.ndarray) -> np.ndarray:
@@ -365,6 +371,8 @@ def _inverses(matrices: np.ndarray) -> np.ndarray:
     """
     if _GUFUNC_INV is None:  # pragma: no cover
         return np.linalg.inv(matrices)
+    if _EXTOBJ is not None:  # pragma: no cover (numpy 1.x)
+        return _GUFUNC_INV(matrices, signature='d->d', extobj=_EXTOBJ)
     with np.errstate(call=_raise_singular, invalid='call', over='ignore', divide='ignore',
                      under='ignore'):
         return _GUFUNC_INV(matrices, signature='d->d')
