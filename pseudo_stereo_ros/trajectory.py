@@ -521,7 +521,7 @@ class TrajectoryFuser(GatedEstimator):
         self._focal_list = self._focal.tolist()
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
-        self._depth = np.full(len(cameras), max(baseline, 1e-3))
+        self._depth = [max(baseline, 1e-3)] * len(cameras)
         # Frame store, time-ordered in [_start, _end).
         self._capacity = capacity = max(_CAPACITY, 2 * int(self._windows[-1]))
         self._stamp = np.zeros(capacity, dtype=np.int64)
@@ -702,7 +702,7 @@ class TrajectoryFuser(GatedEstimator):
         self._weight[position] = weight
         self._end = end = end + 1
         start = max(self._start, end - self._longest)
-        newest = int(self._stamp[end - 1])
+        newest = stamp if position == end - 1 else int(self._stamp[end - 1])
         oldest = newest - self.max_window_ns
         stamps = self._stamp
         while start < end and stamps[start] < oldest:  # usually one step at most
@@ -1295,13 +1295,11 @@ class TrajectoryFuser(GatedEstimator):
             count = columns
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]
-            selector = position[:, :count]
             # At the event the position is the coefficients of tau^0 (every third), unless
             # the velocity jump of an impact before it enters (the 12-coefficient fits).
             picks = 3 if count == 9 or not position[0, 9] else None
         else:
             count = len(columns)
-            selector = position[:, columns]
             picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
         kept = sizes.tolist()
@@ -1319,7 +1317,8 @@ class TrajectoryFuser(GatedEstimator):
         unit = np.add.reduce(matrices * inverses.transpose(0, 2, 1), axis=2)
         errors = np.maximum.reduce(np.abs(unit - 1.0), axis=1).tolist()
         betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
-        if picks is None:
+        if picks is None:  # (only with 12 unknowns: ``columns`` is a count)
+            selector = position[:, :count]
             points = (betas @ selector.T).tolist()
             covariances = (selector @ inverses @ selector.T).tolist()
         else:
