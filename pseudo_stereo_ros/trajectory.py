@@ -345,7 +345,9 @@ def _raise_singular(error: str, flag: int) -> None:
     raise np.linalg.LinAlgError('Singular matrix')
 
 
-try:  # the LAPACK routine np.linalg.inv calls, without its per-call Python layer
+# The LAPACK routine np.linalg.inv calls, without its per-call Python layer.
+_GUFUNC_INV: np.ufunc | None
+try:
     from numpy.linalg import _umath_linalg
     _GUFUNC_INV = _umath_linalg.inv
 except (ImportError, AttributeError):  # pragma: no cover (numpy 1.26 to 2.4 have it)
