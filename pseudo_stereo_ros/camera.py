@@ -101,6 +101,13 @@ class Camera:
         r_t = self.R.T
         self.rotation_t_rows: tuple[Point3, Point3, Point3] = (
             _point3(r_t[0]), _point3(r_t[1]), _point3(r_t[2]))
+        # Without distortion (a pinhole, no skew) undistortion is a closed form, the one OpenCV
+        # computes, bit for bit: (u - cx) * (1 / fx), (v - cy) * (1 / fy) (tested).
+        self._pinhole: tuple[float, float, float, float] | None = None
+        if not self.fisheye and not np.any(self.D) and self.K[0, 1] == 0.0 and \
+                np.array_equal(self.K[2], (0.0, 0.0, 1.0)):
+            self._pinhole = (float(self.K[0, 2]), 1.0 / float(self.K[0, 0]),
+                             float(self.K[1, 2]), 1.0 / float(self.K[1, 1]))
 
     @classmethod
     def from_file(cls, path: PathLike, *, name: str | None = None) -> Camera:
@@ -158,6 +165,10 @@ class Camera:
 
     def normalize_one(self, u: float, v: float) -> tuple[float, float]:
         """Undistort one raw pixel to a normalized (x, y) pair of floats."""
+        pinhole = self._pinhole
+        if pinhole is not None:
+            cx, fx_inverse, cy, fy_inverse = pinhole
+            return float((u - cx) * fx_inverse), float((v - cy) * fy_inverse)
         xy = self._undistort(np.array(((u, v),), dtype=float).reshape(1, 1, 2), self.K, self.D)
         return float(xy[0, 0, 0]), float(xy[0, 0, 1])
 

@@ -340,6 +340,46 @@ _POSITION = _position_row(0, None)
 _POSITION.flags.writeable = False
 
 
+def _raise_singular(error: str, flag: int) -> None:
+    """Raise numpy's error for a singular matrix (the call of :func:`_inverses`' errstate)."""
+    raise np.linalg.LinAlgError('Singular matrix')
+
+
+# The LAPACK routine np.linalg.inv calls, without its per-call Python layer.
+_GUFUNC_INV: np.ufunc | None
+try:
+    from numpy.linalg import _umath_linalg
+    _GUFUNC_INV = _umath_linalg.inv
+except (ImportError, AttributeError):  # pragma: no cover (numpy 1.26 to 2.4 have it)
+    _GUFUNC_INV = None
+# numpy 1.x: that error state as the ufunc's ``extobj``, as numpy 1.26's own ``inv`` passes it
+# (its ``np.errstate`` costs ~5 us); numpy 2 has no ``extobj`` and a cheap ``np.errstate``.
+_EXTOBJ: list | None = None
+if _GUFUNC_INV is not None and hasattr(np, 'geterrobj'):  # pragma: no cover (numpy 1.x)
+    with np.errstate(invalid='call', over='ignore', divide='ignore', under='ignore'):
+        _EXTOBJ = np.geterrobj()[:2] + [_raise_singular]
+
+
+def _inverses(matrices: np.ndarray) -> np.ndarray:
+    """
+    Return ``np.linalg.inv(matrices)`` for a stack of float64 matrices, the same floats.
+
+    The routine numpy's own ``inv`` calls, under the same error state (a singular matrix
+    raises ``LinAlgError``; overflow, division and underflow are ignored), without the
+    wrapper's type and shape checks (a few microseconds per event).
+
+    :param matrices: (K, m, m) float64
+    :raises np.linalg.LinAlgError: a matrix is singular
+    """
+    if _GUFUNC_INV is None:  # pragma: no cover
+        return np.linalg.inv(matrices)
+    if _EXTOBJ is not None:  # pragma: no cover (numpy 1.x)
+        return _GUFUNC_INV(matrices, signature='d->d', extobj=_EXTOBJ)
+    with np.errstate(call=_raise_singular, invalid='call', over='ignore', divide='ignore',
+                     under='ignore'):
+        return _GUFUNC_INV(matrices, signature='d->d')
+
+
 def _sizes(count: int, windows: np.ndarray) -> np.ndarray:
     """Return the window sizes (ascending) for ``count`` frames: the nested ones and all."""
     key = (count, int(windows[-1]))
@@ -469,6 +509,7 @@ class TrajectoryFuser(GatedEstimator):
         # Window sizes [frames]: each camera contributes as many frames as in a pair's windows
         # (more cameras must not shorten the windows' time spans).
         self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
+        self._shortest, self._longest = int(self._windows[0]), int(self._windows[-1])
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -482,7 +523,7 @@ class TrajectoryFuser(GatedEstimator):
         self._focal_list = self._focal.tolist()
         baseline = max(float(np.linalg.norm(a - b)) for a in self._center for b in self._center)
         #: Per camera, a recent depth of the ball [m]: weights of frames before any fit.
-        self._depth = np.full(len(cameras), max(baseline, 1e-3))
+        self._depth = [max(baseline, 1e-3)] * len(cameras)
         # Frame store, time-ordered in [_start, _end).
         self._capacity = capacity = max(_CAPACITY, 2 * int(self._windows[-1]))
         self._stamp = np.zeros(capacity, dtype=np.int64)
@@ -496,9 +537,13 @@ class TrajectoryFuser(GatedEstimator):
         # difference of two prefixes, moved to the event's time by a linear map (see _fit).
         # [i] sums frames [_start, i).
         self._prefix = np.zeros((capacity + 1, 13, 13))
+        # Their leading 10 x 10 blocks (the fits without an impact), contiguous: a window's
+        # system is then one subtraction of contiguous blocks, ready to multiply.
+        self._prefix10 = np.zeros((capacity + 1, 10, 10))
         # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
         # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
         self._shift = {9: np.eye(10), 12: np.eye(13)}
+        self._shift_t = {9: np.eye(10), 12: np.eye(13)}  # their transposes, contiguous
         # Per camera: rotation rows and the third row, as plain floats (a detection's rows).
         self._rotation_rows = [tuple(tuple(float(v) for v in row) for row in rotation)
                                for rotation in self._rotation]
@@ -610,7 +655,7 @@ class TrajectoryFuser(GatedEstimator):
             if predicted > 0.0:
                 depth = predicted
         frame: _Frame = (stamp, index, np.array(equations[:2]), np.array(equations[2]),
-                         self._focal[index] / depth)
+                         self._focal_list[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
         elif fresh:
@@ -658,8 +703,8 @@ class TrajectoryFuser(GatedEstimator):
         self._rhs[position] = rhs
         self._weight[position] = weight
         self._end = end = end + 1
-        start = max(self._start, end - int(self._windows[-1]))
-        newest = int(self._stamp[end - 1])
+        start = max(self._start, end - self._longest)
+        newest = stamp if position == end - 1 else int(self._stamp[end - 1])
         oldest = newest - self.max_window_ns
         stamps = self._stamp
         while start < end and stamps[start] < oldest:  # usually one step at most
@@ -697,6 +742,7 @@ class TrajectoryFuser(GatedEstimator):
                  b0 * jump * w if jump else 0.0, b1 * jump * w if jump else 0.0,
                  b2 * jump * w if jump else 0.0)))
             np.add(prefix[first], design.T @ design, out=prefix[end])
+            self._prefix10[end] = prefix[end, :10, :10]
             return
         if first == self._start:
             prefix[first] = 0.0
@@ -710,6 +756,7 @@ class TrajectoryFuser(GatedEstimator):
         design *= weight
         np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
         prefix[first + 1:end + 1] += prefix[first]
+        self._prefix10[first:end + 1] = prefix[first:end + 1, :10, :10]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -1032,23 +1079,29 @@ class TrajectoryFuser(GatedEstimator):
             t_break = None  # the impact has left the window: plain fits
         # Window k holds the newest sizes[k] frames: a difference of prefix sums, moved from
         # the reference stamp's coefficients to the event's (tau -> tau - delta per axis).
-        quadratic = self.order == 2 and count >= self._windows[0]
+        quadratic = self.order == 2 and count >= self._shortest
         sizes = _sizes(count, self._windows) if quadratic else np.array((count,))
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         unknowns = 9 if t_break is None else 12  # the jump's columns only with an impact
-        shift = self._shift[unknowns]
-        shift[0, 1] = shift[3, 4] = shift[6, 7] = -delta
-        shift[0, 2] = shift[3, 5] = shift[6, 8] = delta * delta
-        shift[1, 2] = shift[4, 5] = shift[7, 8] = -2.0 * delta
-        prefix = self._prefix
+        shift, shift_t = self._shift[unknowns], self._shift_t[unknowns]
+        shift[0, 1] = shift[3, 4] = shift[6, 7] = shift_t[1, 0] = shift_t[4, 3] = \
+            shift_t[7, 6] = -delta
+        shift[0, 2] = shift[3, 5] = shift[6, 8] = shift_t[2, 0] = shift_t[5, 3] = \
+            shift_t[8, 6] = delta * delta
+        shift[1, 2] = shift[4, 5] = shift[7, 8] = shift_t[2, 1] = shift_t[5, 4] = \
+            shift_t[8, 7] = -2.0 * delta
         previous = end - sizes
-        systems = prefix[end] - prefix.take(previous, axis=0)
-        # The unknowns first, the right-hand side last.
-        systems = systems[:, :10, :10] if t_break is None else \
-            systems[:, _AUGMENTED[:, None], _AUGMENTED]
-        # (A contiguous stack: numpy 1.26 and 2.x then multiply it the same way, bit for bit.)
-        systems = np.matmul(np.matmul(shift.T, np.ascontiguousarray(systems)), shift)
+        # The unknowns first, the right-hand side last.  (A contiguous stack: numpy 1.26 and
+        # 2.x then multiply it the same way, bit for bit.)
+        if t_break is None:
+            prefix = self._prefix10
+            systems = prefix[end] - prefix.take(previous, axis=0)
+        else:
+            prefix = self._prefix
+            systems = np.ascontiguousarray((prefix[end] - prefix.take(previous, axis=0))[
+                :, _AUGMENTED[:, None], _AUGMENTED])
+        systems = np.matmul(np.matmul(shift_t, systems), shift)
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = _POSITION if t_break is None else _position_row(0, stamp - t_break)
         kept: _Fits | None = None
@@ -1244,23 +1297,21 @@ class TrajectoryFuser(GatedEstimator):
             count = columns
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]
-            selector = position[:, :count]
             # At the event the position is the coefficients of tau^0 (every third), unless
             # the velocity jump of an impact before it enters (the 12-coefficient fits).
             picks = 3 if count == 9 or not position[0, 9] else None
         else:
             count = len(columns)
-            selector = position[:, columns]
             picks = 2  # the constant velocity's x0 x1 y0 y1 z0 z1
         # More equations (two per frame) than unknowns; sizes ascend, so a suffix.
-        first = 0 if len(sizes) and sizes[0] > count // 2 else \
-            int(sizes.searchsorted(count // 2, side='right'))
-        if first == len(sizes):
+        kept = sizes.tolist()
+        first = 0 if kept and kept[0] > count // 2 else bisect.bisect_right(kept, count // 2)
+        if first == len(kept):
             return None
         if first:
-            sizes, matrices, moments = sizes[first:], matrices[first:], moments[first:]
+            kept, matrices, moments = kept[first:], matrices[first:], moments[first:]
         try:
-            inverses = np.linalg.inv(matrices)
+            inverses = _inverses(matrices)
         except np.linalg.LinAlgError:
             return None
         # A (numerically) singular system leaves M M^-1 far from the identity.
@@ -1268,7 +1319,8 @@ class TrajectoryFuser(GatedEstimator):
         unit = np.add.reduce(matrices * inverses.transpose(0, 2, 1), axis=2)
         errors = np.maximum.reduce(np.abs(unit - 1.0), axis=1).tolist()
         betas = np.matmul(inverses, moments[:, :, None])[:, :, 0]
-        if picks is None:
+        if picks is None:  # (only with 12 unknowns: ``columns`` is a count)
+            selector = position[:, :count]
             points = (betas @ selector.T).tolist()
             covariances = (selector @ inverses @ selector.T).tolist()
         else:
@@ -1277,7 +1329,7 @@ class TrajectoryFuser(GatedEstimator):
             covariances = inverses[:, :3 * picks:picks, :3 * picks:picks].tolist()
         # The standard deviation in the camera's pixels per pixel of noise is
         # sqrt(variance) * f / depth; NaN compares False (a non-finite fit is dropped).
-        limit = self.max_uncertainty / self._focal[index]
+        limit = self.max_uncertainty / self._focal_list[index]
         limit2 = limit * limit
         (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
         good = []
@@ -1288,7 +1340,6 @@ class TrajectoryFuser(GatedEstimator):
                 good.append(k)
         if not good:
             return None
-        kept = sizes.tolist()
         if len(good) < len(kept):
             kept = [kept[k] for k in good]
             points = [points[k] for k in good]

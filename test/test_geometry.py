@@ -72,6 +72,21 @@ def test_empty_input_gives_empty_output():
     assert camera.normalize(np.empty((0, 2))).shape == (0, 2)
 
 
+@pytest.mark.parametrize('distortion', sorted(DISTORTIONS))
+def test_normalize_one_is_opencvs_undistortion_bit_for_bit(distortion):
+    # Without distortion normalize_one takes a closed form instead of OpenCV's call: the
+    # same floats, for pixels inside and outside the image; distorted lenses use OpenCV.
+    camera, _ = rig(distortion)
+    pixels = np.random.default_rng(5).uniform(-300.0, 2500.0, (500, 2))
+    expected = camera.normalize(pixels)
+    found = np.array([camera.normalize_one(u, v) for u, v in pixels.tolist()])
+    assert (camera._pinhole is not None) == (distortion == 'none')
+    np.testing.assert_array_equal(found, expected)
+    if distortion == 'none':  # the closed form really is (u - cx) / fx, not a copy of OpenCV
+        np.testing.assert_allclose(found, (pixels - camera.K[:2, 2]) / np.diag(camera.K)[:2],
+                                   rtol=1e-15, atol=1e-15)
+
+
 def test_ideal_pixels_round_trip_through_normalized():
     camera, _ = rig('plumb_bob')
     pixels = camera.project(volume_points())

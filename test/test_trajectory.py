@@ -27,6 +27,7 @@ path is fitted exactly when the motion is one).  The 60 fps three-camera rows ar
 import itertools
 import math
 from pathlib import Path
+import warnings
 
 import numpy as np
 from pseudo_stereo_ros.camera import Camera
@@ -44,7 +45,7 @@ from pseudo_stereo_ros.records import Observation, positions_array
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
                                              make_scenario, observe, Scenario,
                                              shutter_stamps, truth_at)
-from pseudo_stereo_ros.trajectory import (_map_terms, _position_map, _position_row,
+from pseudo_stereo_ros.trajectory import (_inverses, _map_terms, _position_map, _position_row,
                                           TrajectoryFuser)
 import pytest
 
@@ -466,6 +467,27 @@ def test_the_position_map_forms_agree(offset_ns, jump_offset_ns):
                                rtol=1e-14, atol=1e-14)
 
 
+def test_stacked_inverse_is_numpys_bit_for_bit_and_raises_on_a_singular_matrix():
+    # _inverses calls the LAPACK routine of np.linalg.inv without its Python layer: the same
+    # floats (also for strided views, as the fits pass them), and a singular system raises
+    # numpy's LinAlgError (never a warning or a NaN result), whatever the ambient error state.
+    rng = np.random.default_rng(11)
+    design = rng.normal(size=(7, 30, 10)) * np.logspace(-3, 3, 10)
+    systems = np.einsum('kni,knj->kij', design, design)
+    matrices = systems[:, :9, :9]  # a strided view
+    assert np.array_equal(_inverses(matrices), np.linalg.inv(matrices))
+    singular = np.ascontiguousarray(matrices)
+    singular[3, 4] = singular[3, :, 4] = 0.0  # a coefficient no equation determines
+    with np.errstate(all='raise'):
+        for function in (np.linalg.inv, _inverses):
+            with pytest.raises(np.linalg.LinAlgError):
+                function(singular)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        with pytest.raises(np.linalg.LinAlgError):
+            _inverses(singular)
+
+
 @pytest.mark.parametrize('scenario', ['spiral', 'bounce'])
 def test_prefix_sums_appended_frame_by_frame_equal_a_full_rebuild(scenario):
     # The prefix sums grow by one frame per event (the float form of the position map); a
@@ -477,14 +499,19 @@ def test_prefix_sums_appended_frame_by_frame_equal_a_full_rebuild(scenario):
     checked = 0
     for k, observation in enumerate(sorted(data.observations, key=lambda o: o.stamp_ns)):
         fuser.update(observation)
-        if k % 10 == 9 and fuser._end - fuser._start > 1:
-            start, end = fuser._start, fuser._end
+        start, end = fuser._start, fuser._end
+        # The contiguous copy of the leading 10 x 10 blocks (fits without an impact) follows.
+        assert np.array_equal(fuser._prefix10[start:end + 1],
+                              fuser._prefix[start:end + 1, :10, :10])
+        if k % 10 == 9 and end - start > 1:
             # Sums since the window's first frame (appended prefixes start from older ones).
             grown = fuser._prefix[start + 1:end + 1] - fuser._prefix[start]
             scale = np.abs(fuser._prefix[start:end + 1]).max()
             fuser._rebuild(start)
             np.testing.assert_allclose(fuser._prefix[start + 1:end + 1], grown, rtol=0,
                                        atol=1e-12 * scale)
+            assert np.array_equal(fuser._prefix10[start:end + 1],
+                                  fuser._prefix[start:end + 1, :10, :10])
             checked += 1
     assert checked >= 5
     if scenario == 'bounce':
