@@ -229,8 +229,8 @@ _BREAK_GRID = 9
 # Finer grids around the best impact time, each a fifth of the last step, down to 10 us.
 _BREAK_ZOOM = 3
 _BREAK_RESOLUTION_NS = 10_000
-# The coefficients of a path whose jump is vertical (a bounce on a horizontal surface).
-_VERTICAL_JUMP = np.array((0, 1, 2, 3, 4, 5, 6, 7, 8, 11))
+# Below this horizontal speed [m/s] a bounce's jump is taken as vertical only.
+_BOUNCE_MIN_SPEED = 0.1
 # Smoothing of the running innovation spread and of Rice's noise estimate; the clip of one
 # noise sample (in variances) once warmed up.
 _SPREAD_ALPHA = 0.05
@@ -544,8 +544,8 @@ class TrajectoryFuser(GatedEstimator):
         # Whether it was within the gate (a doubtful one, fitted if the next one agrees).
         self._pending_doubtful = False
         self._doubtful_path: _Path | None = None  # the path fitted with it
-        # The vertical jump's position at the frame that confirmed an impact, or None.
-        self._vertical_point: np.ndarray | None = None
+        # A bounce's position at the frame that confirmed it, or None (_bounce_estimate).
+        self._bounce_point: np.ndarray | None = None
         self._break: int | None = None  # stamp of the impact inside the window [ns], or None
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
@@ -1019,18 +1019,20 @@ class TrajectoryFuser(GatedEstimator):
         frames = (stamps, rows, rhs, weights)
         # Two frames after the impact do not place it with a free jump (four equations, four
         # unknowns: the time chosen by the residual would fit the noise).  A bounce on a
-        # horizontal surface (a table, the floor) changes the velocity mostly along the
-        # vertical: a vertical jump (two unknowns) places it where it explains both frames
-        # within the noise; the free jump is then fitted at that time.  Otherwise halfway
-        # before the pending frame, until later frames refine it.  (A time halfway into an
-        # interval was 20-35 mm off at the next event with three cameras at 60 fps.)
+        # horizontal surface (a table, the floor) changes the velocity in the vertical plane
+        # of the flight: a jump in that plane (at most three unknowns with the time) places
+        # it where it explains both frames within the noise; the free jump is then fitted at
+        # that time.  Otherwise (a hit) halfway before the pending frame, until later frames
+        # refine it.  (A time halfway into an interval was 20-35 mm off at the next event
+        # with three cameras at 60 fps.)
         best = None
-        vertical = self._refine_break(frames, int(frame[0]),
-                                      int(self._stamp[max(first, end - 2)]), high, True)
-        if vertical is not None and self._explains(vertical, stamps, cameras, rows, rhs):
-            best = self._refine_break(frames, int(frame[0]), vertical[1], vertical[1])
+        directions = self._bounce_directions(high)
+        bounce = self._refine_break(frames, int(frame[0]), int(self._stamp[max(first, end - 2)]),
+                                    high, directions)
+        if bounce is not None and self._explains(bounce, stamps, cameras, rows, rhs):
+            best = self._refine_break(frames, int(frame[0]), bounce[1], bounce[1])
         else:
-            vertical = None
+            bounce = None
         if best is None:
             for earlier, later in ((end - 1, None), (end - 2, end - 1)):
                 if earlier < first:
@@ -1057,24 +1059,44 @@ class TrajectoryFuser(GatedEstimator):
         self._segment += 1
         self._pending = None
         self.stats['breaks'] += 1
-        self._vertical_point = None if vertical is None else \
-            self._vertical_estimate(vertical, int(frame[0]), int(frame[1]))
+        self._bounce_point = None if bounce is None else \
+            self._bounce_estimate(bounce, directions, int(frame[0]), int(frame[1]))
         return True
 
-    def _vertical_estimate(self, vertical: _Break, stamp: int, index: int) -> np.ndarray | None:
+    def _bounce_directions(self, stamp: int) -> np.ndarray:
         """
-        Return the vertical jump's position at its newest frame if it is determined well.
+        Return (3, k) directions that span a bounce's velocity jump at ``stamp``.
+
+        A ball bouncing off a horizontal surface (a table, the floor) without side spin
+        changes its velocity in the vertical plane of its flight: the vertical (the
+        restitution) and the horizontal direction of its velocity (friction, top or back
+        spin); the vertical alone when it has hardly any horizontal speed.
+        """
+        before = self._predict_point(stamp - 1_000_000)
+        after = self._predict_point(stamp + 1_000_000)
+        vx, vy = (after[0] - before[0]) / 0.002, (after[1] - before[1]) / 0.002
+        speed = math.hypot(vx, vy)
+        if speed > _BOUNCE_MIN_SPEED:
+            return np.array(((0.0, vx / speed), (0.0, vy / speed), (1.0, 0.0)))
+        return np.array(((0.0,), (0.0,), (1.0,)))
+
+    def _bounce_estimate(self, bounce: _Break, directions: np.ndarray, stamp: int,
+                         index: int) -> np.ndarray | None:
+        """
+        Return a bounce's position at its newest frame if it is determined well.
 
         With the free jump fitted to two frames after an impact, the position along the
         newest camera's ray can be too uncertain to give (``max_uncertainty``); the
-        vertical jump that placed the impact explained both frames and has one unknown
-        instead of three.
+        bounce's jump that placed the impact explained both frames with fewer unknowns.
+
+        :param bounce: the bounce's path (:meth:`_refine_break` with ``directions``)
+        :param directions: (3, k) the directions of its jump
         """
-        _, t_break, beta, normal = vertical
+        _, t_break, beta, normal = bounce
         row = _position_row(0, stamp - t_break)
+        free = np.concatenate((row[:, :9], row[:, 9:] @ directions), axis=1)
         try:
-            covariance = row[:, _VERTICAL_JUMP] @ np.linalg.solve(normal,
-                                                                  row[:, _VERTICAL_JUMP].T)
+            covariance = free @ np.linalg.solve(normal, free.T)
         except np.linalg.LinAlgError:
             return None
         point = row @ beta
@@ -1086,10 +1108,10 @@ class TrajectoryFuser(GatedEstimator):
         return None
 
     def _estimate_at_break(self, stamp: int, index: int) -> Estimate | None:
-        """Return the estimate at the frame that confirmed an impact (see _vertical_estimate)."""
+        """Return the estimate at the frame that confirmed an impact (see _bounce_estimate)."""
         degenerate = self.stats['degenerate']
         estimate = self._estimate(stamp, index)
-        point, self._vertical_point = self._vertical_point, None
+        point, self._bounce_point = self._bounce_point, None
         if estimate is None and point is not None and self.stats['degenerate'] > degenerate:
             self.stats['degenerate'] -= 1  # not dropped after all
             estimate = Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
@@ -1125,7 +1147,7 @@ class TrajectoryFuser(GatedEstimator):
 
     def _refine_break(self, frames: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                       stamp: int, low: int, high: int,
-                      vertical: bool = False) -> _Break | None:
+                      directions: np.ndarray | None = None) -> _Break | None:
         """
         Return (residual sum of squares, impact stamp, beta, normal matrix) minimizing it.
 
@@ -1133,9 +1155,9 @@ class TrajectoryFuser(GatedEstimator):
         the best time (the residual is smooth between frames; the time, not the grid,
         decides how far the jump's path is off right after the impact).
 
-        :param vertical: the jump along z only (a bounce on a horizontal surface); beta
-            still has 12 coefficients, the horizontal jump zero (the normal matrix has
-            the 10 of :data:`_VERTICAL_JUMP`)
+        :param directions: (3, k) the jump restricted to these directions' span (a bounce:
+            see :meth:`_bounce_directions`), or None (free); beta still has 12
+            coefficients, the normal matrix 9 + k
         :return: None if no candidate time gave a solution
         """
         stamps, rows, rhs, weights = frames
@@ -1143,7 +1165,8 @@ class TrajectoryFuser(GatedEstimator):
         base = _position_map(offsets, None)  # (n, 3, 12) without the jump
         design = np.einsum('nra,nam->nrm', rows, base) * weights[:, None, None]
         vector = (rhs * weights[:, None]).reshape(-1)
-        columns = _VERTICAL_JUMP if vertical else slice(None)
+        if directions is None:
+            directions = np.eye(3)
         best: _Break | None = None
 
         def search(candidates: np.ndarray) -> None:
@@ -1152,8 +1175,9 @@ class TrajectoryFuser(GatedEstimator):
                 jump = np.maximum(0.0, (stamps - t_break).astype(float) / _SCALE_NS)
                 if not np.any(jump > 0.0):
                     continue
-                design[:, :, 9:] = rows * (jump * weights)[:, None, None]
-                flat = design.reshape(-1, 12)[:, columns]
+                flat = np.concatenate((design[:, :, :9], (rows @ directions)
+                                       * (jump * weights)[:, None, None]),
+                                      axis=2).reshape(len(stamps) * 2, -1)
                 try:
                     beta = np.linalg.solve(flat.T @ flat, flat.T @ vector)
                 except np.linalg.LinAlgError:
@@ -1161,8 +1185,7 @@ class TrajectoryFuser(GatedEstimator):
                 residual = flat @ beta - vector
                 rss = float(residual @ residual)
                 if best is None or rss < best[0]:
-                    if vertical:
-                        beta = np.concatenate((beta[:9], (0.0, 0.0), beta[9:]))
+                    beta = np.concatenate((beta[:9], directions @ beta[9:]))
                     best = (rss, int(t_break), beta, flat.T @ flat)
 
         if low == high:
