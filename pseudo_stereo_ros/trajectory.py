@@ -782,19 +782,21 @@ class TrajectoryFuser(GatedEstimator):
 
     def _statistic(self, stamp: int, index: int, prediction: tuple[float, float, float],
                    equations: tuple[tuple[float, ...], ...]
-                   ) -> tuple[float, tuple[float, float] | None, float]:
+                   ) -> tuple[float, tuple[float, float] | None, float, bool]:
         """
         Return a detection's innovation statistic (chi-square, 2 d.o.f.) against the path.
 
         :return: ``(statistic, innovation (two floats) [px] or None, its mean square
-            [px^2])``; the statistic is infinite (and the innovation None) where the
-            prediction is not in front of the camera
+            [px^2], whether the prediction's own variance entered)``; the statistic is
+            infinite (and the innovation None) where the prediction is not in front of
+            the camera
         """
         x, y, z = prediction
         (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
         depth = (x - c0) * d0 + (y - c1) * d1 + (z - c2) * d2
         found = None  # the innovation [px] (two floats)
         statistic = squared = math.inf
+        uncertain = False
         if depth > 0.0:
             # The innovation and its Jacobian (rows * scale) [px/m].
             scale = self._focal_list[index] / depth
@@ -820,12 +822,13 @@ class TrajectoryFuser(GatedEstimator):
             spread = noise if self._spread is None else max(noise, self._spread)
             statistic = 2.0 * squared / spread
             if not statistic <= self.innovation_gate:
+                uncertain = True
                 spread = noise + sigma2 * scale * scale * \
                     self._predicted_spread(stamp, equations) / 2.0
                 if self._spread is not None:
                     spread = max(spread, self._spread)
                 statistic = 2.0 * squared / spread
-        return statistic, found, squared
+        return statistic, found, squared, uncertain
 
     def _check(self, frame: _Frame, prediction: tuple[float, float, float] | None,
                equations: tuple[tuple[float, ...], ...]) -> str:
@@ -844,7 +847,8 @@ class TrajectoryFuser(GatedEstimator):
             # No path yet, an impact being placed, the noise not known yet, or a path from
             # too few frames to judge a detection by (a flight's first frames).
             return 'ok'
-        statistic, found, squared = self._statistic(stamp, index, prediction, equations)
+        statistic, found, squared, uncertain = self._statistic(stamp, index, prediction,
+                                                               equations)
         if statistic <= self.innovation_gate:
             self._spread = squared if self._spread is None else self._spread + \
                 _SPREAD_ALPHA * (squared - self._spread)
@@ -855,8 +859,10 @@ class TrajectoryFuser(GatedEstimator):
                 self._rejected[pending[1]] = (pending[0], self._pending_innovation)
                 self._pending = None
                 return 'ok'
-            # Within the gate but unlikely as noise (p ~ 5e-5): see _doubtful_estimate.
-            return 'ok' if statistic <= _DOUBT else 'doubtful'
+            # Within the gate but unlikely as noise (p ~ 5e-5) against a path known well
+            # there: see _doubtful_estimate.  (Let in by the path's own uncertainty, the
+            # detection tells more than the path: fitted.)
+            return 'ok' if statistic <= _DOUBT or uncertain else 'doubtful'
         rejected = self._rejected.get(index)
         if found is not None and rejected is not None and \
                 rejected[0] == self._previous.get(index) and rejected[1] is not None and \
