@@ -93,10 +93,17 @@ floor).  If the next detection of any camera agrees with the path, the
 pending one was an outlier (``outlier``).  If it disagrees too and a path with
 a velocity jump explains both (their residuals within the gate, or ten times
 smaller than without the jump), the impact is confirmed (``breaks``): both
-are fitted with the jump, placed halfway into one of the last two intervals
-before the pending frame, and its time is refined on a grid over the next six
-frames.  Windows that reach back past the impact carry the jump; frames
-before an earlier impact are dropped.  Two disagreeing detections that no jump
+are fitted with the jump, placed in time by a jump in the flight's vertical plane
+(a bounce: the vertical and the horizontal direction of the velocity) where that
+explains both within the noise, else halfway into one of the last two intervals
+before the pending frame, and its time is refined on a grid, then finer grids
+around the best, over the next six frames.  A detection within the gate but
+unlikely as noise (``_DOUBT``) against a path known well there gets its estimate
+from the fit with it and then waits, pending, for the next detection: judged
+against the path before it, both disagreeing and explained by a jump make an
+impact (the first detection after one is only a few pixels off); otherwise it is
+fitted as it would have been at once.  Windows that reach back past the impact
+carry the jump; frames before an earlier impact are dropped.  Two disagreeing detections that no jump
 explains mean the path is lost: the fit restarts from them (``restarts``), and
 the lost path's estimates no longer bound the plausible speed (a new ball
 served before the rig paused).  A camera's first detection after a silence
