@@ -104,9 +104,9 @@ against the path before it, both disagreeing and explained by a jump make an
 impact (the first detection after one is only a few pixels off); otherwise it is
 fitted as it would have been at once.  Windows that reach back past the impact
 carry the jump; frames before an earlier impact are dropped.  Two disagreeing
-detections that no jump explains mean the path is lost: the fit restarts from them (``restarts``), and
-the lost path's estimates no longer bound the plausible speed (a new ball
-served before the rig paused).  A camera's first detection after a silence
+detections that no jump explains mean the path is lost: the fit restarts from
+them (``restarts``), and the lost path's estimates no longer bound the
+plausible speed (a new ball served before the rig paused).  A camera's first detection after a silence
 longer than its max gap is fitted without gating: meanwhile the path drifted
 along the other cameras' rays, where they cannot see, and they would judge the
 returning camera's detections stray; unless another camera's detection is
