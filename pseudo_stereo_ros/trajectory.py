@@ -78,39 +78,39 @@ paper's anchors (the real sessions' flight starts), and no detection is gated
 by it.  Where the paper has none yet either, a constant-velocity fit of all
 frames serves.
 
-**Impacts and outliers.**  A new detection is compared with the path
-predicted from the previous event: its innovation less that camera's last
-residual (slow biases cancel again), over its expected spread (noise,
-prediction covariance, and the running spread of accepted innovations).  No
-detection is gated before the noise is known (ten samples: a wrongly low
-noise makes false impacts).  Beyond ``gate`` (chi-square, 2 d.o.f.) the
-detection is *pending*: not fitted, and its event's estimate (kind
-``'predicted'``) is the predicted position, or, when the detection moved off
-it along the image of the vertical by no more than an impact could carry the
-ball since the last frame, the point of its ray nearest to the prediction
-with vertical offsets preferred (the first frame after a bounce on a table or
-floor).  If the next detection of any camera agrees with the path, the
-pending one was an outlier (``outlier``).  If it disagrees too and a path with
-a velocity jump explains both (their residuals within the gate, or ten times
-smaller than without the jump), the impact is confirmed (``breaks``): both
-are fitted with the jump, placed in time by a jump in the flight's vertical plane
-(a bounce: the vertical and the horizontal direction of the velocity) where that
-explains both within the noise, else halfway into one of the last two intervals
-before the pending frame, and its time is refined on a grid, then finer grids
-around the best, over the next six frames.  A detection within the gate but
-unlikely as noise (``_DOUBT``) against a path known well there gets its estimate
-from the fit with it and then waits, pending, for the next detection: judged
-against the path before it, both disagreeing and explained by a jump make an
-impact (the first detection after one is only a few pixels off); otherwise it is
-fitted as it would have been at once.  Windows that reach back past the impact
-carry the jump; frames before an earlier impact are dropped.  Two disagreeing
-detections that no jump explains mean the path is lost: the fit restarts from
-them (``restarts``), and the lost path's estimates no longer bound the
-plausible speed (a new ball served before the rig paused).  A camera's first detection after a silence
-longer than its max gap is fitted without gating: meanwhile the path drifted
-along the other cameras' rays, where they cannot see, and they would judge the
-returning camera's detections stray; unless another camera's detection is
-pending and the two confirm an impact (a camera silent across a bounce).
+**Impacts and outliers.**  A new detection is compared with the path predicted
+from the previous event: its innovation less that camera's last residual (slow
+biases cancel again), over its expected spread (noise, prediction covariance,
+and the running spread of accepted innovations).  No detection is gated before
+the noise is known (ten samples: a wrongly low noise makes false impacts).
+Beyond ``gate`` (chi-square, 2 d.o.f.) the detection is *pending*: not fitted,
+and its event's estimate (kind ``'predicted'``) is the predicted position, or,
+when the detection moved off it along the image of the vertical by no more than
+an impact could carry the ball since the last frame, the point of its ray
+nearest to the prediction with vertical offsets preferred (the first frame
+after a bounce on a table or floor).  If the next detection of any camera
+agrees with the path, the pending one was an outlier (``outlier``).  If it
+disagrees too and a path with a velocity jump explains both (their residuals
+within the gate, or ten times smaller than without the jump), the impact is
+confirmed (``breaks``): both are fitted with the jump, placed in time by a jump
+in the flight's vertical plane (a bounce: the vertical and the horizontal
+direction of the velocity) where that explains both within the noise, else
+halfway into one of the last two intervals before the pending frame, and its
+time is refined on a grid, then finer grids around the best, over the next six
+frames.  A detection within the gate but unlikely as noise (``_DOUBT``) against
+a path known well there gets its estimate from the fit with it and then waits,
+pending, for the next detection: judged against the path before it, both
+disagreeing and explained by a jump make an impact (the first detection after
+one is only a few pixels off); otherwise it is fitted as it would have been at
+once.  Windows that reach back past the impact carry the jump; frames before an
+earlier impact are dropped.  Two disagreeing detections that no jump explains
+mean the path is lost: the fit restarts from them (``restarts``), and the lost
+path's estimates no longer bound the plausible speed (a new ball served before
+the rig paused).  A camera's first detection after a silence longer than its
+max gap is fitted without gating: meanwhile the path drifted along the other
+cameras' rays, where they cannot see, and they would judge the returning
+camera's detections stray; unless another camera's detection is pending and the
+two confirm an impact (a camera silent across a bounce).
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
