@@ -634,11 +634,11 @@ class TrajectoryFuser(GatedEstimator):
             # without gating if its camera was silent); otherwise it is fitted as it would
             # have been at once, and this one judged against the path with it.
             if stamp - pending[0] <= self.gate.rig_gap_ns and self._break_range is None:
-                prediction = self._predict_point(stamp)
-                depth = c0 * prediction[0] + c1 * prediction[1] + c2 * prediction[2] - r2
+                before = self._predict_point(stamp)  # the path before the doubtful one
+                depth = c0 * before[0] + c1 * before[1] + c2 * before[2] - r2
                 frame: _Frame = (stamp, index, rows, rhs, self._focal[index] / (
                     depth if depth > 0.0 else self._depth[index]))
-                if fresh or not self._statistic(stamp, index, prediction,
+                if fresh or not self._statistic(stamp, index, before,
                                                 equations)[0] <= self.innovation_gate:
                     if self._confirm_break(frame):
                         return self._estimate_at_break(stamp, index)
