@@ -1182,24 +1182,39 @@ class TrajectoryFuser(GatedEstimator):
             directions = np.eye(3)
         best: _Break | None = None
 
+        fixed = design[:, :, :9].reshape(len(stamps) * 2, 9)
+        along = (rows @ directions) * weights[:, None, None]  # (n, 2, k)
+
         def search(candidates: np.ndarray) -> None:
+            # All candidate times at once: (K, 2n, 9 + k) designs, stacked solves.
             nonlocal best
-            for t_break in candidates:
-                jump = np.maximum(0.0, (stamps - t_break).astype(float) / _SCALE_NS)
-                if not np.any(jump > 0.0):
-                    continue
-                flat = np.concatenate((design[:, :, :9], (rows @ directions)
-                                       * (jump * weights)[:, None, None]),
-                                      axis=2).reshape(len(stamps) * 2, -1)
-                try:
-                    beta = np.linalg.solve(flat.T @ flat, flat.T @ vector)
-                except np.linalg.LinAlgError:
-                    continue
-                residual = flat @ beta - vector
-                rss = float(residual @ residual)
-                if best is None or rss < best[0]:
-                    beta = np.concatenate((beta[:9], directions @ beta[9:]))
-                    best = (rss, int(t_break), beta, flat.T @ flat)
+            jumps = np.maximum(0.0, (stamps[None, :] - candidates[:, None]).astype(float)
+                               / _SCALE_NS)  # (K, n)
+            candidates = candidates[np.any(jumps > 0.0, axis=1)]
+            jumps = jumps[np.any(jumps > 0.0, axis=1)]
+            if not len(candidates):
+                return
+            flats = np.concatenate((np.broadcast_to(fixed, (len(candidates),) + fixed.shape),
+                                    (jumps[:, :, None, None] * along).reshape(
+                                        len(candidates), len(stamps) * 2, -1)), axis=2)
+            normals = flats.transpose(0, 2, 1) @ flats
+            try:
+                betas = np.linalg.solve(normals, (flats.transpose(0, 2, 1) @ vector)[:, :, None])
+            except np.linalg.LinAlgError:  # one singular candidate: each on its own
+                betas = np.full(normals.shape[:2] + (1,), np.nan)
+                for k, normal in enumerate(normals):
+                    try:
+                        betas[k] = np.linalg.solve(normal, flats[k].T @ vector)[:, None]
+                    except np.linalg.LinAlgError:
+                        continue
+            residuals = (flats @ betas)[:, :, 0] - vector
+            rss = np.einsum('kr,kr->k', residuals, residuals)
+            if not np.any(np.isfinite(rss)):
+                return
+            k = int(np.nanargmin(rss))
+            if best is None or rss[k] < best[0]:
+                beta = np.concatenate((betas[k, :9, 0], directions @ betas[k, 9:, 0]))
+                best = (float(rss[k]), int(candidates[k]), beta, normals[k])
 
         if low == high:
             search(np.array((low,), dtype=np.int64))
