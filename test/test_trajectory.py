@@ -20,8 +20,9 @@ geometric mean over varied cases and below 0.95x in each, coverage >= 90% of the
 events, no estimate over 0.5 m off; Table 1's columns at most 0.5x; the error right after an
 impact below ``paper``'s; three cameras better than any pair; on the real table-tennis data
 median and p90 within 1.1x the interpolation oracle's) or from the model itself (a polynomial
-path is fitted exactly when the motion is one).  The 60 fps three-camera rows are not held
-(two of six favour a pair; README, "Three cameras").
+path is fitted exactly when the motion is one).  Of the 60 fps three-camera rows five are
+held; the straight line at the 0.05 px rounding floor favours a pair at that one offset
+(README, "Three cameras").
 """
 
 import itertools
@@ -201,12 +202,20 @@ def test_outliers_are_rejected_not_fitted():
     assert np.linalg.norm(positions_array(ours) - data.truth_points[index], axis=1).max() < 0.1
 
 
-@pytest.mark.parametrize('scenario, noise', [('straight', 0.0), ('straight', 0.3),
-                                             ('spiral', 0.0), ('spiral', 0.3),
-                                             ('bounce', 0.0), ('bounce', 0.3)])
-def test_three_cameras_beat_every_pair(scenario, noise):
+@pytest.mark.parametrize('fps, scenario, noise', [
+    (fps, scenario, noise) for fps in (30.0, 60.0)
+    for scenario in ('straight', 'spiral', 'bounce') for noise in (0.0, 0.3)
+    # Not held: the straight line at 60 fps with 0.05 px rounding only (0.034 mm against
+    # 0.033 for pair 1-3): at the rounding floor this one offset's rounding pattern favours
+    # the pair; at six of seven offsets from 0.2 to 0.45 of a period the three cameras win
+    # (0.75x-0.96x the best pair; README, "Three cameras").
+    if (fps, scenario, noise) != (60.0, 'straight', 0.0)])
+def test_three_cameras_beat_every_pair(fps, scenario, noise):
+    # At 60 fps (three cameras: 180 Hz) the bounce without noise needs an impact placed in
+    # time from two detections after it (a jump in the flight's vertical plane): halfway
+    # into an interval, as before, it was 0.186 mm against 0.106 mm for pair 1-2.
     cameras = make_rig('three')
-    case = Case('three', 30.0, 1 / 3, noise, False, scenario, seed=3)
+    case = Case('three', fps, 1 / 3, noise, False, scenario, seed=3)
     observations, truth_stamps, truth_points = simulate_case(case, cameras)
     everything, _ = fuse(cameras, observations, method='trajectory')
     events = len({o.stamp_ns for o in observations})
@@ -358,6 +367,72 @@ def test_a_camera_back_from_a_silence_across_an_impact_confirms_it(seed):
     after = [e for e in ours if e.stamp_ns >= back][:4]
     assert len(after) == 4 and after[0].stamp_ns - back < 50_000_000
     assert errors_of_points(after, data).mean() < np.nanmean(theirs)
+
+
+@pytest.mark.parametrize('rig', ['default', 'wide'])
+def test_a_doubtful_detection_after_an_impact_waits_for_the_next(rig):
+    # Noisy bounces at 30 fps with jittered shutters and 10% of the detections dropped.
+    # With seed 23 the first detection after an impact comes 3.8 ms after it, only 4 px off
+    # the path (within the gate), and then both cameras miss 60 ms of frames.  Fitted at
+    # once, it bent the short windows: the next detection, 60 ms later, was judged against
+    # the bent path (and let in by its uncertainty), no impact was ever confirmed, and the
+    # estimates were 0.12-0.23 m off (1.02x paper over the case).  Now it waits for the next
+    # detection, judged against the path before it: both disagree, an impact.
+    for seed in (21, 22, 23, 24):
+        result = run_case(Case(rig, 30.0, 0.3, 0.3, True, 'bounce', seed=seed))
+        assert result.ratio < 0.6, (seed, result.ratio)
+        assert result.max_error_m < 0.1, (seed, result.max_error_m)
+        assert result.coverage >= 0.9
+
+
+def bounce_with_friction(duration=2.0):
+    """Return a ball dropped from 2 m whose bounces also slow it (x0.6) and push it sideways."""
+    gravity = 9.8
+    segments = []  # (start, x, y, z, vx, vy, vz)
+    state = (0.0, 0.6, 1.0, 2.0, 0.8, 0.0, 0.0)
+    while state[0] < duration:
+        start, x, y, z, vx, vy, vz = state
+        hit = (vz + math.sqrt(vz * vz + 2 * gravity * z)) / gravity
+        segments.append(state)
+        state = (start + hit, x + vx * hit, y + vy * hit, 0.0, 0.6 * vx, vy + 0.4,
+                 -0.8 * (vz - gravity * hit))
+    table = np.array(segments)
+
+    def position(t):
+        t = np.asarray(t, dtype=float)
+        k = np.clip(np.searchsorted(table[:, 0], t, side='right') - 1, 0, len(table) - 1)
+        dt = t - table[k, 0]
+        return np.column_stack((table[k, 1] + table[k, 4] * dt, table[k, 2] + table[k, 5] * dt,
+                                table[k, 3] + table[k, 6] * dt - 0.5 * gravity * dt * dt))
+    return Scenario('friction', duration, position, 'bounces with friction'), table[1:, 0]
+
+
+@pytest.mark.parametrize('fps, friction', [(30.0, False), (60.0, False), (60.0, True)])
+def test_an_impact_is_placed_in_time_from_two_detections_after_it(fps, friction):
+    # From the second event after an impact (the first whose estimate has the jump) the
+    # error is set by how well the impact's time is known.  Placed halfway into an interval
+    # (before), events 2-4 averaged 0.25-0.4x paper's (event 2: 8-25 mm); placed by a jump
+    # in the flight's vertical plane that explains both detections, then refined on finer
+    # grids, they are within a tenth of paper's, also for a bounce that slows the ball and
+    # pushes it sideways (friction, spin).
+    cameras = default_rig()
+    if friction:
+        scenario, impacts = bounce_with_friction()
+    else:
+        scenario, impacts = make_scenario('bounce'), np.array(impact_times())
+    stamps = [shutter_stamps(fps, scenario.duration_s, phase_s=p) for p in (0.0, 0.5 / fps)]
+    observations = observe(scenario, cameras, stamps, quantization_px=0.05)
+    truth_stamps = np.unique(np.concatenate(stamps))
+    truth_points = truth_at(scenario, truth_stamps)
+    ours, stats = fuse(cameras, observations, method='trajectory')
+    paper, _ = fuse(cameras, observations)
+    assert stats['breaks'] == len(impacts)
+    mine = impact_errors(ours, truth_stamps, truth_points, impacts, events=4,
+                         observations=observations)
+    theirs = impact_errors(paper, truth_stamps, truth_points, impacts, events=4,
+                           observations=observations)
+    assert np.isfinite(mine).all()
+    assert np.mean(mine[:, 1:]) < 0.1 * np.mean(theirs[:, 1:]), (mine, theirs)
 
 
 def errors_of_points(estimates, data):
