@@ -146,6 +146,7 @@ from __future__ import annotations
 import bisect
 from collections import deque
 from collections.abc import Mapping, Sequence
+import itertools
 import math
 from typing import TypeAlias
 
@@ -1451,11 +1452,12 @@ class TrajectoryFuser(GatedEstimator):
         """
         if isinstance(solutions, _Solutions):  # one stack: all windows at once
             stacks = [(solutions.betas, solutions.inverses)]
-        else:  # windows with and without an impact's jump (9 or 12 unknowns)
+        else:  # windows without and with an impact's jump (9, then 12 unknowns): two stacks
             stacks = []
-            for k in range(longest + 1):
-                full_beta, full_inverse = self._full(*solutions[k])
-                stacks.append((full_beta[None], full_inverse[None]))
+            fits = [self._full(*solutions[k]) for k in range(longest + 1)]
+            for _, group in itertools.groupby(fits, key=lambda fit: len(fit[0])):
+                betas, inverses = zip(*group)
+                stacks.append((np.stack(betas), np.stack(inverses)))
         lowers: list[tuple[np.ndarray, np.ndarray]] = []
         points: list = []
         covariances: list = []
