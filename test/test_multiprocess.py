@@ -157,7 +157,7 @@ def test_detector_and_fuser_processes(tmp_path):
 
 @pytest.mark.parametrize('args, name', [
     (['fuser', '--ros-args', '-p', 'camera_names:=[]'], 'camera_names'),
-    (['fuser', '--ros-args', '-p', 'method:=best'], 'method'),
+    (['fuser', '--ros-args', '-p', 'method:=kalman'], 'method'),
     (['fuser', '--ros-args', '-p', 'max_gap_s:=1'], 'max_gap_s'),
     (['detector', '--ros-args', '-p', 'choice:=brightest'], 'choice'),
     (['virtual_camera', '--ros-args', '-p', 'scenario:=loop'], 'scenario'),

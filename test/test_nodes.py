@@ -187,7 +187,7 @@ def test_fuser_node_stops_on_a_stale_camera_and_resumes(context, namespace):
 @pytest.mark.parametrize('overrides, match', [
     ([Parameter('camera_names', value=['camera1'])], 'camera_names'),
     ([Parameter('camera_names', value=['camera1', 'camera1'])], 'camera_names'),
-    ([Parameter('method', value='best')], 'method'),
+    ([Parameter('method', value='kalman')], 'method'),
     ([Parameter('calibration_files', value=['a.yaml'])], 'calibration_files'),
     ([Parameter('sync_tolerance_s', value=0.2)], 'max_gap'),
     ([Parameter('world_frame', value='')], 'world_frame'),
