@@ -182,7 +182,7 @@ class GatedEstimator:
         """Estimate at one admitted observation (the method), or None (counted)."""
         raise NotImplementedError
 
-    def _supersedes(self, estimate: Estimate) -> bool:
+    def _supersedes(self, estimate: Estimate, previous: Estimate) -> bool:
         """Whether ``estimate``, within the sync tolerance of another camera's, replaces it."""
         return True
 
@@ -208,7 +208,7 @@ class GatedEstimator:
                 continue
             if (estimates and estimate.stamp_ns - estimates[-1].stamp_ns <= self.sync_tolerance_ns
                     and estimates[-1].camera != estimate.camera
-                    and self._supersedes(estimate)):
+                    and self._supersedes(estimate, estimates[-1])):
                 estimates[-1] = estimate
             else:
                 estimates.append(estimate)

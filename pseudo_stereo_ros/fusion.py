@@ -251,7 +251,7 @@ class Fuser(GatedEstimator):
         stats['estimates'] += 1
         return Estimate(stamp, camera, point[0], point[1], point[2], kind)
 
-    def _supersedes(self, estimate: Estimate) -> bool:
+    def _supersedes(self, estimate: Estimate, previous: Estimate) -> bool:
         """Only the direct stereo point of a synchronized pair replaces the prediction."""
         return estimate.kind == 'sync'
 

@@ -461,9 +461,12 @@ class TrajectoryFuser(GatedEstimator):
     ``max_gap_ns``, ``sync_tolerance_ns``).
 
     :param cameras: the calibrated cameras (two or more; a sequence or a mapping name -> camera)
-    :param sync_tolerance_ns: estimates of two cameras closer than this describe one instant
-        (:meth:`process` keeps the later, which saw both) [ns] (default 1 ms; never more than
-        a quarter of the measured frame period: the input gate's)
+    :param sync_tolerance_ns: observations of two cameras closer than this are one instant
+        for the input gate and the paper method's stand-in (a flight's first frames) [ns]
+        (default 1 ms; never more than a quarter of the measured frame period: the input
+        gate's).  The fit itself estimates at every stamp: :meth:`process` keeps one
+        estimate per distinct stamp (the later, which saw both, at an equal stamp), as the
+        node publishes one per shutter event
     :param max_gap_ns: upper bound of every camera's max gap (each uses at most 4.5 of its
         measured frame periods): an estimate needs two cameras with a detection within
         their max gap, and a pause of the rig longer than that starts a new flight [ns]
@@ -655,6 +658,16 @@ class TrajectoryFuser(GatedEstimator):
         if estimate.kind == 'predicted':
             self.stats['predicted'] += 1
         return estimate
+
+    def _supersedes(self, estimate: Estimate, previous: Estimate) -> bool:
+        """
+        Replace only an estimate at the same stamp: the fit evaluates at each event's stamp.
+
+        Two cameras' shutters a fraction of a millisecond apart are two shutter events
+        with two estimates (keeping only the later lost up to 13 % of the events in
+        jittered cases, where the node published both).
+        """
+        return estimate.stamp_ns == previous.stamp_ns
 
     def _fit_frame(self, index: int, stamp: int, x: float, y: float, late: bool,
                    fresh: bool = False) -> Estimate | None:

@@ -100,6 +100,24 @@ def test_estimates_at_interpolates_within_max_gap():
     assert np.isnan(points[3]).all()
 
 
+def test_estimates_at_takes_the_later_of_two_cameras_within_the_sync_tolerance():
+    # Two cameras' estimates 0.5 ms apart are one instant: the later, which saw both frames,
+    # stands for it; one camera's two estimates are never merged.
+    base = 1_721_679_791_000_000_000
+    estimates = [Estimate(base, 'a', 0.0, 0.0, 0.0, 'pseudo'),
+                 Estimate(base + 6_000_000, 'a', 9.0, 9.0, 9.0, 'pseudo'),
+                 Estimate(base + 6_500_000, 'b', 6.0, 0.0, 0.0, 'sync')]
+    query = np.array([base + 3_000_000, base + 6_000_000], np.int64)
+    points = estimates_at(estimates, query, max_gap_ns=100_000_000)
+    np.testing.assert_allclose(points[0], [3.0 * 6.0 / 6.5, 0.0, 0.0])
+    np.testing.assert_allclose(points[1], [6.0 * 6.0 / 6.5, 0.0, 0.0])
+    points = estimates_at(estimates, query, max_gap_ns=100_000_000, sync_tolerance_ns=0)
+    np.testing.assert_allclose(points, [[4.5, 4.5, 4.5], [9.0, 9.0, 9.0]])
+    same_camera = [e._replace(camera='a') for e in estimates]
+    np.testing.assert_allclose(estimates_at(same_camera, query, max_gap_ns=100_000_000)[1],
+                               [9.0, 9.0, 9.0])
+
+
 def test_cli_table(capsys):
     args = ['holdout'] + [str(LFG / session) for session in SESSIONS]
     for camera in CAMERAS:
