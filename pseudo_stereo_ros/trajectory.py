@@ -246,8 +246,15 @@ _SIGMA_ALPHA = 0.02
 _EULER_GAMMA = 0.5772156649015329
 # Residuals of frames with a larger leverage (short fits) do not enter the noise estimate.
 _MAX_LEVERAGE = 0.5
-# Noise samples needed before detections are gated (a wrongly low noise makes false impacts).
+# Noise samples needed before detections are gated at the measured noise (a wrongly low noise
+# makes false impacts).  From _SIGMA_PROVISIONAL samples on they are gated at a provisional
+# noise, _PROVISIONAL_FACTOR times the estimate and at least _PROVISIONAL_SIGMA_PX: wide
+# enough not to judge a good detection stray, narrow enough to keep a wrong blob out of a
+# flight's first fits (there the window is short and one stray detection bends it most).
 _SIGMA_MATURE = 10
+_SIGMA_PROVISIONAL = 3
+_PROVISIONAL_FACTOR = 2.0
+_PROVISIONAL_SIGMA_PX = 1.0
 # Frames in the window before detections are gated: a flight's first velocity fits
 # extrapolate too roughly to tell an outlier or an impact (the real data's flight starts).
 _GATE_SUPPORT = 6
@@ -579,6 +586,9 @@ class TrajectoryFuser(GatedEstimator):
         #: The measured detection noise [px] (Rice's estimator), kept across flights.
         self.sigma_px: float | None = None
         self._sigma_count = 0
+        # The noise detections are gated at [px]: None (not gated yet), provisional, then
+        # sigma_px (see _SIGMA_MATURE).
+        self._gate_sigma: float | None = None
         self._log_variance: float | None = None
         self._forget()
 
@@ -871,8 +881,8 @@ class TrajectoryFuser(GatedEstimator):
             (g0, g1, g2), (h0, h1, h2), (q0, q1) = equations
             found = ((g0 * x + g1 * y + g2 * z - q0) * scale,
                      (h0 * x + h1 * y + h2 * z - q1) * scale)
-            assert self.sigma_px is not None, 'a mature noise estimate has a value'
-            sigma2 = self.sigma_px ** 2
+            assert self._gate_sigma is not None, 'detections are gated with a noise level'
+            sigma2 = self._gate_sigma ** 2
             noise = sigma2  # the detection's variance per axis [px^2]
             innovation_x, innovation_y = found
             last = self._residual.get(index)
@@ -910,14 +920,22 @@ class TrajectoryFuser(GatedEstimator):
         :param equations: the frame's rows and right-hand sides as floats (2 x 3, 2)
         """
         stamp, index = frame[0], frame[1]
-        if prediction is None or self._break_range is not None or \
-                self._sigma_count < _SIGMA_MATURE or self._end - self._start < _GATE_SUPPORT:
-            # No path yet, an impact being placed, the noise not known yet, or a path from
-            # too few frames to judge a detection by (a flight's first frames).
+        if prediction is None or self._gate_sigma is None or \
+                self._end - self._start < _GATE_SUPPORT:
+            # No path yet, the noise not known yet, or a path from too few frames to judge a
+            # detection by (a flight's first frames).
             return 'ok'
+        refining = self._break_range is not None
+        if self._break_range is not None:
+            after = self._camera[self._start:self._end][
+                self._stamp[self._start:self._end] > self._break_range[1]]
+            if len(after) < _REFINE_MIN or np.all(after == after[0]):
+                # An impact just confirmed: the jump is known from too few frames, or from
+                # one camera only (along its rays the path is not known yet).
+                return 'ok'
         statistic, found, squared, uncertain = self._statistic(stamp, index, prediction,
                                                                equations)
-        if statistic <= self.innovation_gate:
+        if statistic <= self.innovation_gate and not refining:
             self._spread = squared if self._spread is None else self._spread + \
                 _SPREAD_ALPHA * (squared - self._spread)
         pending = self._pending
@@ -928,9 +946,11 @@ class TrajectoryFuser(GatedEstimator):
                 self._pending = None
                 return 'ok'
             # Within the gate but unlikely as noise (p ~ 5e-5) against a path known well
-            # there: see _doubtful_estimate.  (Let in by the path's own uncertainty, the
-            # detection tells more than the path: fitted.)
-            return 'ok' if statistic <= _DOUBT or uncertain else 'doubtful'
+            # there: see _doubtful_estimate.  (Let in by the path's own uncertainty, or
+            # while an impact's time is refined, the detection tells more than the path:
+            # fitted.)
+            return 'ok' if statistic <= _DOUBT or uncertain or refining or \
+                self._sigma_count < _SIGMA_MATURE else 'doubtful'
         rejected = self._rejected.get(index)
         if found is not None and rejected is not None and \
                 rejected[0] == self._previous.get(index) and rejected[1] is not None and \
@@ -1057,7 +1077,13 @@ class TrajectoryFuser(GatedEstimator):
         degrees) and by no more than reversing the ball's velocity since the last fitted
         frame could carry it.  Otherwise (a stray detection) None.
         """
-        index = frame[1]
+        stamp, index = frame[0], frame[1]
+        assert self._path is not None, 'an impact point needs a path'
+        t_ref, _, _, t_break, coefficients = self._path
+        tau, _, jump = _map_terms(stamp - t_ref, None if t_break is None else stamp - t_break)
+        if coefficients[7] + 2.0 * coefficients[8] * tau + (coefficients[11] if jump else 0.0) \
+                >= 0.0:
+            return None  # the path does not descend: no bounce on a horizontal surface
         found = self._innovation(index, frame[2], frame[3], point)
         if found is None:
             return None
@@ -1070,6 +1096,8 @@ class TrajectoryFuser(GatedEstimator):
         offset = point - self._center[index]
         on_ray = self._center[index] + direction * float((offset * weights) @ direction) / \
             float((direction * weights) @ direction)
+        if on_ray[2] <= point[2]:
+            return None  # a bounce lifts the ball above the path it would have followed
         last = self._predict(int(self._stamp[self._end - 1]))[0]
         reach = _IMPACT_REACH * float(np.linalg.norm(point - last))
         return on_ray if float(np.linalg.norm(on_ray - point)) <= reach else None
@@ -1204,8 +1232,8 @@ class TrajectoryFuser(GatedEstimator):
         """
         _, t_break, beta, _ = found
         maps = _position_map(stamps[-2:] - int(stamps[-1]), stamps[-2:] - t_break)
-        assert self.sigma_px is not None, '_check gates detections only with a mature noise'
-        spread = max(self.sigma_px ** 2, self._spread or 0.0)
+        assert self._gate_sigma is not None, '_check gates detections only with a noise level'
+        spread = max(self._gate_sigma ** 2, self._spread or 0.0)
         for k in (-2, -1):
             after = self._innovation(int(cameras[k]), rows[k], rhs[k], maps[k] @ beta)
             before = self._innovation(int(cameras[k]), rows[k], rhs[k],
@@ -1702,3 +1730,8 @@ class TrajectoryFuser(GatedEstimator):
                 self._log_variance = log_sample if self._log_variance is None else \
                     self._log_variance + alpha * (log_sample - self._log_variance)
                 self.sigma_px = max(self.min_sigma_px, math.exp(0.5 * self._log_variance))
+                if self._sigma_count >= _SIGMA_MATURE:
+                    self._gate_sigma = self.sigma_px
+                elif self._sigma_count >= _SIGMA_PROVISIONAL:
+                    self._gate_sigma = max(_PROVISIONAL_FACTOR * self.sigma_px,
+                                           _PROVISIONAL_SIGMA_PX)
