@@ -81,14 +81,18 @@ frames serves.
 **Impacts and outliers.**  A new detection is compared with the path predicted
 from the previous event: its innovation less that camera's last residual (slow
 biases cancel again), over its expected spread (noise, prediction covariance,
-and the running spread of accepted innovations).  No detection is gated before
-the noise is known (ten samples: a wrongly low noise makes false impacts).
-Beyond ``gate`` (chi-square, 2 d.o.f.) the detection is *pending*: not fitted,
-and its event's estimate (kind ``'predicted'``) is the predicted position, or,
-when the detection moved off it along the image of the vertical by no more than
-an impact could carry the ball since the last frame, the point of its ray
+and the running spread of accepted innovations).  Until the noise is known
+(ten samples: a wrongly low noise makes false impacts) the gate uses a
+provisional noise, twice the estimate and at least 1 px, from three samples on
+(a flight's first 0.4 s at 30 fps: a stray detection there, fitted, bent the
+short windows 0.2 m).  Beyond ``gate`` (chi-square, 2 d.o.f.) the detection is
+*pending*: not fitted, and its event's estimate (kind ``'predicted'``) is the
+predicted position, or, when the detection moved off it along the image of the
+vertical by no more than an impact could carry the ball since the last frame,
+where the path descends and the point lies above it, the point of its ray
 nearest to the prediction with vertical offsets preferred (the first frame
-after a bounce on a table or floor).  If the next detection of any camera
+after a bounce on a table or floor, which lifts the ball off the path it
+would have followed).  If the next detection of any camera
 agrees with the path, the pending one was an outlier (``outlier``).  If it
 disagrees too and a path with a velocity jump explains both (their residuals
 within the gate, or ten times smaller than without the jump), the impact is
@@ -97,7 +101,9 @@ in the flight's vertical plane (a bounce: the vertical and the horizontal
 direction of the velocity) where that explains both within the noise, else
 halfway into one of the last two intervals before the pending frame, and its
 time is refined on a grid, then finer grids around the best, over the next six
-frames.  A detection within the gate but unlikely as noise (``_DOUBT``) against
+frames; once two frames of two cameras follow the pending one, detections are
+gated there too (a stray one, fitted while the jump was known from so few
+frames, was 1.1-1.4 m off).  A detection within the gate but unlikely as noise (``_DOUBT``) against
 a path known well there gets its estimate from the fit with it and then waits,
 pending, for the next detection: judged against the path before it, both
 disagreeing and explained by a jump make an impact (the first detection after
