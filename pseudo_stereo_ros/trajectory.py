@@ -292,6 +292,12 @@ _Residual: TypeAlias = tuple[int, int, tuple[float, float]]
 # A path with an impact: (residual sum of squares, impact stamp [ns], beta (12,) at the
 # newest frame, normal matrix (m, m) of its free coefficients).
 _Break: TypeAlias = tuple[float, int, np.ndarray, np.ndarray]
+# The fuser's state before an impact was confirmed (see _snapshot): attribute -> value.
+_Snapshot: TypeAlias = dict[str, object]
+# The attributes a snapshot keeps as they are (replaced, never changed in place).
+_SNAPSHOT_ATTRIBUTES = ('_start', '_end', '_reference', '_weights_guessed', '_path', '_pending',
+                        '_pending_innovation', '_pending_doubtful', '_doubtful_path',
+                        '_bounce_point', '_break', '_break_range', '_segment', '_spread')
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
 _Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
 
@@ -622,6 +628,12 @@ class TrajectoryFuser(GatedEstimator):
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
         self._segment = 0  # counts impacts: residuals are compared within a segment only
+        # An impact confirmed from two detections, until a third (or fourth) one after it
+        # decides which of them was stray, if any (see _recheck_impact): the state before
+        # it, the frames before it (stamps, cameras, rows, rhs, weights), the lower end of
+        # its time's range, a bounce's directions there, and the frames after it so far.
+        self._tentative: tuple[_Snapshot, tuple[np.ndarray, ...], int, np.ndarray,
+                               list[_Frame]] | None = None
         # Running spread of accepted innovations, per axis [px^2].
         self._spread: float | None = None
         # Camera index -> its newest residual in the fit.
@@ -702,6 +714,10 @@ class TrajectoryFuser(GatedEstimator):
                      (b0 - y * c0, b1 - y * c1, b2 - y * c2), (r0 - x * r2, r1 - y * r2))
         rows = np.array(equations[:2])
         rhs = np.array(equations[2])
+        if self._tentative is not None:
+            held = self._recheck_impact(index, stamp, rows, rhs, late or fresh)
+            if held is not None:
+                return held[0]
         pending = self._pending
         if pending is not None and self._pending_doubtful and not late:
             # A doubtful detection waits for this one (see _doubtful_estimate): an impact if
@@ -1049,6 +1065,7 @@ class TrajectoryFuser(GatedEstimator):
         self._break = None
         self._break_range = None
         self._segment += 1
+        self._tentative = None
 
     def _pending_estimate(self, frame: _Frame) -> Estimate | None:
         """Return the estimate at a pending detection's event: the predicted position."""
@@ -1158,6 +1175,8 @@ class TrajectoryFuser(GatedEstimator):
         if not self._explains(best, stamps, cameras, rows, rhs, loose=True):
             return False
         t_break = best[1]
+        self._tentative = (self._snapshot(), (stamps[:-2], cameras[:-2], rows[:-2], rhs[:-2],
+                                              weights[:-2]), low, directions, [pending, frame])
         self._start = first
         self._insert(pending)
         self._insert(frame)
@@ -1170,6 +1189,182 @@ class TrajectoryFuser(GatedEstimator):
         self._bounce_point = None if bounce is None else \
             self._bounce_estimate(bounce, directions, int(frame[0]), int(frame[1]))
         return True
+
+    def _snapshot(self) -> _Snapshot:
+        """Return the state an impact's confirmation changes (see :meth:`_restore`)."""
+        state: _Snapshot = {name: getattr(self, name) for name in _SNAPSHOT_ATTRIBUTES}
+        start, end = self._start, self._end
+        state['frames'] = tuple(array[start:end].copy() for array in self._arrays())
+        state['residual'] = dict(self._residual)
+        state['rejected'] = dict(self._rejected)
+        state['depth'] = list(self._depth)
+        return state
+
+    def _restore(self, state: _Snapshot) -> None:
+        """Return to a :meth:`_snapshot`'s state: the window, the path, the pending frame."""
+        segment = self._segment
+        for name in _SNAPSHOT_ATTRIBUTES:
+            setattr(self, name, state[name])
+        start, end = self._start, self._end
+        frames: tuple[np.ndarray, ...] = state['frames']  # type: ignore[assignment]
+        for array, saved in zip(self._arrays(), frames):
+            array[start:end] = saved
+        self._residual = dict(state['residual'])  # type: ignore[call-overload]
+        self._rejected = dict(state['rejected'])  # type: ignore[call-overload]
+        self._depth = list(state['depth'])  # type: ignore[call-overload]
+        # Residuals of the undone segments are not this segment's (the noise estimate).
+        self._noise_residual = {camera: residual for camera, residual
+                                in self._noise_residual.items()
+                                if residual[1] <= self._segment or residual[1] > segment}
+        self._tentative = None
+        self._rebuild(start)
+
+    def _recheck_impact(self, index: int, stamp: int, rows: np.ndarray, rhs: np.ndarray,
+                        unjudged: bool) -> tuple[Estimate | None] | None:
+        """
+        Decide, at the detections after an impact confirmed from two, which one was stray.
+
+        A free velocity jump explains any two detections (four equations, four unknowns):
+        a stray one next to an impact confirms it with the wrong jump (the first detection
+        after an impact pending, the next a wrong blob), 0.4-0.8 m off until the path is
+        lost.  The third detection after the pending one tests the jump: a jump (its time
+        refined) in the flight's vertical plane (a bounce) explaining all three settles it.
+        A free jump explaining them does not: with two cameras, two frames of one camera
+        fix the jump only poorly along its rays, where a stray frame of the other camera
+        hides.  If the third agrees with the path before the impact both were stray (no
+        impact); else it is held (not fitted, its estimate the prediction, or where that is
+        too uncertain the free jump's position) and the fourth decides.  A free jump
+        explaining all four settles it; else, of the four triples, the one a bounce explains
+        best, or else a free jump (within the gate), is kept and the detection left out
+        counted an outlier (the fourth: judged against the path as usual); none: the impact
+        stands, the held one fitted as it would have been.
+
+        :param unjudged: a late or fresh detection (fitted without gating): the impact stands
+        :return: ``(estimate,)`` if this detection is held, else None (fit it as usual)
+        """
+        assert self._tentative is not None, 'called only while an impact is tentative'
+        state, before, low, directions, after = self._tentative
+        if unjudged or not 0 < stamp - after[-1][0] <= self.gate.rig_gap_ns:
+            self._settle()
+            return None
+        depth = self._depth[index]
+        if self._path is not None:
+            point = self._predict_point(stamp)
+            (c0, c1, c2), (d0, d1, d2) = self._center_rows[index], self._rotation_rows[index][2]
+            predicted = (point[0] - c0) * d0 + (point[1] - c1) * d1 + (point[2] - c2) * d2
+            if predicted > 0.0:
+                depth = predicted
+        frame: _Frame = (stamp, index, rows, rhs, self._focal_list[index] / depth)
+        if len(after) == 2:
+            if self._jump_chi2(before, low, after + [frame], directions) is not None:
+                self._tentative = None  # the usual case: a bounce explains all three
+                return None
+            if self._agrees(state['_path'], frame):  # type: ignore[arg-type]
+                # Back on the path before the impact: both detections were stray.
+                self._restore(state)
+                self._pending = None
+                self.stats['outlier'] += 2
+                self.stats['breaks'] -= 1
+                return None
+            after.append(frame)
+            estimate = self._pending_estimate(frame)
+            free = self._jump_chi2(before, low, after)
+            if estimate is None and self.pending_estimate != 'none' and free is not None and \
+                    np.all(np.isfinite(free[1])):
+                # The prediction is not known well enough (right after the impact), but a
+                # free jump explains the three (a hit, a bounce with side spin): its position.
+                self.stats['degenerate'] -= 1  # not dropped after all
+                estimate = Estimate(stamp, self._names[index], float(free[1][0]),
+                                    float(free[1][1]), float(free[1][2]), 'trajectory')
+            return (estimate,)
+        first, second, third = after
+        if self._jump_chi2(before, low, after + [frame]) is not None:
+            self._settle()  # all four explained (a hit, not a bounce): the impact stands
+            return None
+        # One of the four is stray.  Two frames of one camera fix the jump only poorly along
+        # its rays (a rig of two cameras: a stray frame of the other camera is absorbed
+        # there), so a jump in the flight's vertical plane (a bounce), with fewer unknowns,
+        # is preferred to a free one.
+        best: tuple[tuple[int, float], _Frame] | None = None
+        for dropped, triple in ((frame, (first, second, third)), (third, (first, second, frame)),
+                                (second, (first, third, frame)), (first, (second, third, frame))):
+            for rank, plane in enumerate((directions, None)):
+                found = self._jump_chi2(before, low, list(triple), plane)
+                if found is not None:
+                    if best is None or (rank, found[0]) < best[0]:
+                        best = ((rank, found[0]), dropped)
+                    break
+        if best is None or best[1] is frame:
+            self._settle()  # this one is judged against the impact's path as usual
+            return None
+        self._tentative = None
+        self.stats['outlier'] += 1
+        if best[1] is third:
+            return None  # the held one was stray: the impact stands
+        # One of the two that confirmed it was stray: confirm it again without it.
+        kept = [candidate for candidate in after if candidate is not best[1]]
+        self._restore(state)
+        self.stats['breaks'] -= 1
+        self._pending, self._pending_innovation, self._pending_doubtful = kept[0], None, False
+        if self._confirm_break(kept[1]):
+            self._tentative = None
+        return None
+
+    def _settle(self) -> None:
+        """Keep a tentative impact as confirmed; fit its held detection, if any."""
+        assert self._tentative is not None, 'called only while an impact is tentative'
+        after = self._tentative[4]
+        self._tentative = None
+        if len(after) == 3:
+            self._insert(after[2])
+
+    def _jump_chi2(self, before: tuple[np.ndarray, ...], low: int, after: list[_Frame],
+                   directions: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:
+        """
+        Return the chi-square of frames after an impact under a jump fitted to them.
+
+        :param before: the frames before the impact (stamps, cameras, rows, rhs, weights)
+        :param low: the earliest time of the impact [ns]; the latest is the first frame's
+        :param directions: (3, k) a bounce's (see :meth:`_bounce_directions`), or None (free)
+        :return: (chi-square, position at the newest frame [m]), or None if any frame's
+            residual is beyond the gate (or no jump was found)
+        """
+        stamps = np.append(before[0], [frame[0] for frame in after])
+        rows = np.concatenate((before[2], [frame[2] for frame in after]))
+        rhs = np.concatenate((before[3], [frame[3] for frame in after]))
+        weights = np.append(before[4], [frame[4] for frame in after])
+        newest = int(after[-1][0])
+        found = self._refine_break((stamps, rows, rhs, weights), newest, low, int(after[0][0]),
+                                   directions)
+        if found is None:
+            return None
+        _, t_break, beta, _ = found
+        offsets = np.array([frame[0] for frame in after], dtype=np.int64)
+        maps = _position_map(offsets - newest, offsets - t_break)
+        assert self._gate_sigma is not None, 'impacts are confirmed only with a noise level'
+        spread = max(self._gate_sigma ** 2, self._spread or 0.0)
+        total = 0.0
+        for frame, row in zip(after, maps):
+            found_innovation = self._innovation(frame[1], frame[2], frame[3], row @ beta)
+            if found_innovation is None:
+                return None
+            chi2 = float(found_innovation[0] @ found_innovation[0]) / spread
+            if chi2 > self.innovation_gate:
+                return None
+            total += chi2
+        return total, maps[-1] @ beta
+
+    def _agrees(self, path: _Path, frame: _Frame) -> bool:
+        """Return whether a detection is within the gate of a path's prediction."""
+        current, self._path = self._path, path
+        point = np.array(self._predict_point(frame[0]))
+        self._path = current
+        found = self._innovation(frame[1], frame[2], frame[3], point)
+        if found is None:
+            return False
+        assert self._gate_sigma is not None, 'detections are gated only with a noise level'
+        spread = max(self._gate_sigma ** 2, self._spread or 0.0)
+        return float(found[0] @ found[0]) <= self.innovation_gate * spread
 
     def _bounce_directions(self, stamp: int) -> np.ndarray:
         """
