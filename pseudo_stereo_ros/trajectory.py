@@ -101,7 +101,7 @@ in the flight's vertical plane (a bounce: the vertical and the horizontal
 direction of the velocity) where that explains both within the noise, else
 halfway into one of the last two intervals before the pending frame, and its
 time is refined on a grid, then finer grids around the best, over the next six
-frames; once two frames of two cameras follow the pending one, detections are
+frames; once three frames of two cameras follow the pending one, detections are
 gated there too (a stray one, fitted while the jump was known from so few
 frames, was 1.1-1.4 m off).  A detection within the gate but unlikely as noise (``_DOUBT``) against
 a path known well there gets its estimate from the fit with it and then waits,
@@ -236,6 +236,10 @@ _LOWER_CONSISTENCY = 16.0
 # Frames after an impact during which its time is refined, and candidate times.
 _REFINE_FRAMES = 6
 _REFINE_MIN = 2  # frames after the pending one before the time is refined
+# Frames after the pending one, of two cameras at least, before detections are gated while
+# an impact's time is refined (with two, synchronized cameras' right after an impact
+# confirmed a false second one: 2.3 m off; with four, more strays were fitted).
+_GATE_AFTER_IMPACT = 3
 # The prefix sums' reference stamp moves when the newest frame is this much farther from it
 # than the longest window [ns].
 _REANCHOR_NS = 400_000_000
@@ -951,7 +955,7 @@ class TrajectoryFuser(GatedEstimator):
         if self._break_range is not None:
             after = self._camera[self._start:self._end][
                 self._stamp[self._start:self._end] > self._break_range[1]]
-            if len(after) < _REFINE_MIN or np.all(after == after[0]):
+            if len(after) < _GATE_AFTER_IMPACT or np.all(after == after[0]):
                 # An impact just confirmed: the jump is known from too few frames, or from
                 # one camera only (along its rays the path is not known yet).
                 return 'ok'
@@ -990,11 +994,7 @@ class TrajectoryFuser(GatedEstimator):
             # is lost (or was wrong). Start it afresh from them, as at a new flight; the
             # estimates of the lost path no longer bound where the ball can be (a new ball
             # served before the rig paused).
-            self._restart()
-            self.plausibility.reset()
-            self._insert(pending)
-            self._insert(frame)
-            self.stats['restarts'] += 1
+            self._restart_from(pending, frame)
             return 'inserted'
         self._pending = frame
         self._pending_innovation = found
@@ -1066,6 +1066,19 @@ class TrajectoryFuser(GatedEstimator):
         self._break_range = None
         self._segment += 1
         self._tentative = None
+
+    def _restart_from(self, first: _Frame, second: _Frame) -> None:
+        """
+        Start the path afresh from two detections (``restarts``): the old one is lost.
+
+        The lost path's estimates no longer bound where the ball can be (a new ball served
+        before the rig paused).
+        """
+        self._restart()
+        self.plausibility.reset()
+        self._insert(first)
+        self._insert(second)
+        self.stats['restarts'] += 1
 
     def _pending_estimate(self, frame: _Frame) -> Estimate | None:
         """Return the estimate at a pending detection's event: the predicted position."""
@@ -1201,8 +1214,12 @@ class TrajectoryFuser(GatedEstimator):
         return state
 
     def _restore(self, state: _Snapshot) -> None:
-        """Return to a :meth:`_snapshot`'s state: the window, the path, the pending frame."""
-        segment = self._segment
+        """
+        Return to a :meth:`_snapshot`'s state: the window, the path, the pending frame.
+
+        Deliberately kept: the noise estimate (samples from the undone frames are a few
+        among many) and the plausibility gate's history (the estimates were published).
+        """
         for name in _SNAPSHOT_ATTRIBUTES:
             setattr(self, name, state[name])
         start, end = self._start, self._end
@@ -1215,7 +1232,7 @@ class TrajectoryFuser(GatedEstimator):
         # Residuals of the undone segments are not this segment's (the noise estimate).
         self._noise_residual = {camera: residual for camera, residual
                                 in self._noise_residual.items()
-                                if residual[1] <= self._segment or residual[1] > segment}
+                                if residual[1] <= self._segment}
         self._tentative = None
         self._rebuild(start)
 
@@ -1244,7 +1261,7 @@ class TrajectoryFuser(GatedEstimator):
         """
         assert self._tentative is not None, 'called only while an impact is tentative'
         state, before, low, directions, after = self._tentative
-        if unjudged or not 0 < stamp - after[-1][0] <= self.gate.rig_gap_ns:
+        if unjudged or not 0 <= stamp - after[-1][0] <= self.gate.rig_gap_ns:
             self._settle()
             return None
         depth = self._depth[index]
@@ -1308,6 +1325,8 @@ class TrajectoryFuser(GatedEstimator):
         self._pending, self._pending_innovation, self._pending_doubtful = kept[0], None, False
         if self._confirm_break(kept[1]):
             self._tentative = None
+        else:
+            self._restart_from(kept[0], kept[1])  # no impact explains the two left either
         return None
 
     def _settle(self) -> None:

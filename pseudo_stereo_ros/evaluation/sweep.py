@@ -268,6 +268,7 @@ class StrayResult(NamedTuple):
     scenario: str
     fps: float
     seed: int
+    offset: float
     mae_mm: float
     clean_mae_mm: float
     paper_mae_mm: float
@@ -281,27 +282,29 @@ class StrayResult(NamedTuple):
         return self.mae_mm / self.paper_mae_mm
 
 
-def run_strays(scenario: str, fps: float, seed: int, **options) -> StrayResult:
+def run_strays(scenario: str, fps: float, seed: int, *, offset: float = 0.5,
+               **options) -> StrayResult:
     """
     Run ``trajectory`` and ``paper`` on Table 1's rig with 2 % stray detections (from 5 px).
 
-    0.3 px noise, camera 2 half a period after camera 1; the strays' seed is ``seed + 100``.
+    0.3 px noise; the strays' seed is ``seed + 100``.
 
     :param scenario: ``bounce``, ``spiral`` or ``straight``
     :param fps: the frame rate
     :param seed: the noise's seed
+    :param offset: camera 2's delay as a fraction of the frame period (0: synchronized)
     :param options: options of the trajectory fuser
     """
     cameras = default_rig()
-    data = simulate_run(Run(scenario, fps=fps, delta12_s=0.5 / fps, noise_px=0.3, seed=seed),
-                        cameras)
+    data = simulate_run(Run(scenario, fps=fps, delta12_s=offset / fps, noise_px=0.3,
+                            seed=seed), cameras)
     noisy, stray = with_strays(data.observations, seed=seed + 100)
     ours, stats = fuse(cameras, noisy, method='trajectory', **options)
     clean, _ = fuse(cameras, data.observations, method='trajectory', **options)
     paper, _ = fuse(cameras, noisy)
     index = np.searchsorted(data.truth_stamps, [e.stamp_ns for e in ours])
     errors = np.linalg.norm(positions_array(ours) - data.truth_points[index], axis=1)
-    return StrayResult(scenario, fps, seed,
+    return StrayResult(scenario, fps, seed, offset,
                        score(ours, data.truth_stamps, data.truth_points).mae_mm,
                        score(clean, data.truth_stamps, data.truth_points).mae_mm,
                        score(paper, data.truth_stamps, data.truth_points).mae_mm,
