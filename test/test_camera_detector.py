@@ -164,8 +164,10 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
         # The reorder window's last hold, then every estimate's message at the probe: a fixed
         # 0.7 s missed the last one under CI's load.
         stats = fuser.fuser.stats
-        _spin_until(executor, lambda: (stats['observations'] >= frames
-                                       and len(positions) >= stats['estimates']), 10.0)
+        assert _spin_until(executor, lambda: (stats['observations'] >= frames
+                                              and len(positions) >= stats['estimates']), 10.0), (
+            f'the fuser took {stats["observations"]} of {frames} points; the probe has '
+            f'{len(positions)} of its {stats["estimates"]} estimates')
         executor.shutdown()
         probe.destroy_node()
     finally:
