@@ -37,7 +37,7 @@ from pseudo_stereo_ros.errors import FuserConfigError
 from pseudo_stereo_ros.evaluation.holdout import holdout, three_camera_consistency
 from pseudo_stereo_ros.evaluation.sweep import (Case, impact_errors, impact_times, make_rig,
                                                 run_case, run_strays, simulate_case,
-                                                small_cases, summarize)
+                                                small_cases, summarize, with_strays)
 from pseudo_stereo_ros.evaluation.table1 import Run, run_table1, score, simulate_run
 from pseudo_stereo_ros.formats.bagio import read_observations
 from pseudo_stereo_ros.formats.csv_io import read_estimates
@@ -201,15 +201,8 @@ def test_outliers_are_rejected_not_fitted():
     cameras = default_rig()
     data = simulate_run(Run('spiral', noise_px=0.3, seed=2, scenario_options={'turns': 3}),
                         cameras)
-    rng = np.random.default_rng(5)
-    count = round(0.02 * len(data.observations))  # 2% stray detections
-    stray = set(rng.choice(np.arange(20, len(data.observations)), count, replace=False).tolist())
-    noisy = []
-    for k, o in enumerate(data.observations):
-        if k in stray:  # a wrong blob: 15 to 60 px away
-            angle, size = rng.uniform(0, 2 * np.pi), rng.uniform(15, 60)
-            o = o._replace(u=o.u + size * np.cos(angle), v=o.v + size * np.sin(angle))
-        noisy.append(o)
+    # 2 % stray detections: wrong blobs 15 to 60 px away.
+    noisy, stray = with_strays(data.observations, seed=5, low_px=15.0)
     clean, _ = fuse(cameras, data.observations, method='trajectory')
     ours, stats = fuse(cameras, noisy, method='trajectory')
     paper, _ = fuse(cameras, noisy)
