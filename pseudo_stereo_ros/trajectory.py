@@ -284,6 +284,12 @@ _IMPACT_REACH = 5.0
 # A detection within the gate but beyond this chi-square (2 d.o.f., p ~ 5e-5) waits for the
 # next detection before it is fitted (see _check).
 _DOUBT = 20.0
+# A velocity jump at an impact is taken as one only up to twice the ball's speed (a bounce or
+# a hit reverses it at most) plus this [m/s] (see _jump_plausible): a stray detection next
+# to an impact moved the path by 19-51 m/s times the time since the last fitted frame (the
+# stray runs); the real sessions' bounces and hits by at most 20 m/s, twice their speed plus
+# 7 m/s, the simulated bounces by 9-12 m/s.
+_JUMP_MARGIN_MPS = 15.0
 
 
 # A detection to fit: (stamp [ns], camera index, rows (2, 3), right-hand sides (2,), weight).
@@ -300,7 +306,8 @@ _Break: TypeAlias = tuple[float, int, np.ndarray, np.ndarray]
 _Snapshot: TypeAlias = dict[str, object]
 # The attributes a snapshot keeps as they are (replaced, never changed in place).
 _SNAPSHOT_ATTRIBUTES = ('_start', '_end', '_reference', '_weights_guessed', '_path', '_pending',
-                        '_pending_innovation', '_pending_doubtful', '_doubtful_path',
+                        '_pending_innovation', '_pending_doubtful', '_replaced',
+                        '_doubtful_path',
                         '_bounce_point', '_break', '_break_range', '_segment', '_spread')
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
 _Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
@@ -625,12 +632,19 @@ class TrajectoryFuser(GatedEstimator):
         self._pending_innovation: tuple[float, float] | None = None
         # Whether it was within the gate (a doubtful one, fitted if the next one agrees).
         self._pending_doubtful = False
+        # The detection it took the place of, judged stray (see _check), or None.
+        self._replaced: _Frame | None = None
         self._doubtful_path: _Path | None = None  # the path fitted with it
         # A bounce's position at the frame that confirmed it, or None (_bounce_estimate).
         self._bounce_point: np.ndarray | None = None
         self._break: int | None = None  # stamp of the impact inside the window [ns], or None
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
+        # The bounce that explained the first three detections after an impact, which judges
+        # the next ones until they are gated (see _check): the frames before it, the lower
+        # end of its time's range, its directions, the frames after it so far; or None.
+        self._bounce_check: tuple[tuple[np.ndarray, ...], int, np.ndarray,
+                                  list[_Frame]] | None = None
         self._segment = 0  # counts impacts: residuals are compared within a segment only
         # An impact confirmed from two detections, until a third (or fourth) one after it
         # decides which of them was stray, if any (see _recheck_impact): the state before
@@ -762,6 +776,12 @@ class TrajectoryFuser(GatedEstimator):
             verdict = self._check(frame, prediction, equations)
             if verdict == 'pending':
                 return self._pending_estimate(frame)
+            if verdict == 'stray':
+                return self._pending_estimate(frame)
+            if verdict == 'replaced':
+                # Where the ball is depends on which of the two was stray: no estimate.
+                self.stats['pending'] += 1
+                return None
             if verdict == 'inserted':
                 return self._estimate_at_break(stamp, index)
             if verdict == 'doubtful':
@@ -937,9 +957,11 @@ class TrajectoryFuser(GatedEstimator):
     def _check(self, frame: _Frame, prediction: tuple[float, float, float] | None,
                equations: tuple[tuple[float, ...], ...]) -> str:
         """
-        Classify a new detection: 'ok', 'doubtful', 'pending', or 'inserted' (an impact).
+        Classify a new detection: 'ok', 'doubtful', 'pending', 'replaced', 'stray', 'inserted'.
 
         'doubtful': within the gate but beyond :data:`_DOUBT` (see :meth:`_doubtful_estimate`).
+        'replaced': pending in the place of the pending one, judged stray.  'stray': an
+        outlier, not pending.  'inserted': an impact confirmed, or the path restarted.
 
         :param frame: the detection's frame
         :param prediction: the position predicted at its stamp (:meth:`_predict_point`)
@@ -958,6 +980,16 @@ class TrajectoryFuser(GatedEstimator):
             if len(after) < _GATE_AFTER_IMPACT or np.all(after == after[0]):
                 # An impact just confirmed: the jump is known from too few frames, or from
                 # one camera only (along its rays the path is not known yet).
+                # Once a bounce explained the first three (_recheck_impact), it must explain
+                # this one with them: a wrong blob right after an impact, fitted, bent the
+                # jump's path by up to 1.1 m (synchronized cameras, sweep --strays).
+                check = self._bounce_check
+                if check is not None:
+                    before, low, directions, frames = check
+                    if self._jump_chi2(before, low, frames + [frame], directions) is None:
+                        self.stats['outlier'] += 1
+                        return 'stray'
+                    frames.append(frame)
                 return 'ok'
         statistic, found, squared, uncertain = self._statistic(stamp, index, prediction,
                                                                equations)
@@ -965,7 +997,11 @@ class TrajectoryFuser(GatedEstimator):
             self._spread = squared if self._spread is None else self._spread + \
                 _SPREAD_ALPHA * (squared - self._spread)
         pending = self._pending
-        if statistic <= self.innovation_gate:
+        # Two off the path in a row: this one agreeing only thanks to the path's own
+        # uncertainty does not make both stray (the path may be the one off).
+        agrees = statistic <= self.innovation_gate and not (
+            uncertain and pending is not None and self._replaced is not None)
+        if agrees:
             if pending is not None:
                 self.stats['outlier'] += 1  # the path goes on: the pending one was stray
                 self._rejected[pending[1]] = (pending[0], self._pending_innovation)
@@ -990,15 +1026,41 @@ class TrajectoryFuser(GatedEstimator):
         if pending is not None and stamp - pending[0] <= self.gate.rig_gap_ns:
             if self._confirm_break(frame):
                 return 'inserted'
+            if self._replaced is None:
+                # Only a jump no bounce or hit gives explains the two: one of them is stray
+                # (a wrong blob next to an impact, or two in a row), or the path is lost (a
+                # new ball).  The pending one is taken as stray and this one waits in its
+                # place: the next detection agrees with the path (this one stray too), or
+                # confirms an impact with it, or else the path restarts from the two.
+                self.stats['outlier'] += 1
+                self._rejected[pending[1]] = (pending[0], self._pending_innovation)
+                self._pending = frame
+                self._pending_innovation = found
+                self._pending_doubtful = False
+                self._replaced = pending
+                return 'replaced'
             # Two detections in a row off the path and not explained by an impact: the path
             # is lost (or was wrong). Start it afresh from them, as at a new flight; the
             # estimates of the lost path no longer bound where the ball can be (a new ball
             # served before the rig paused).
-            self._restart_from(pending, frame)
+            replaced = self._replaced
+            if replaced is not None and frame[0] - replaced[0] <= self.gate.rig_gap_ns:
+                # The pending one was the stray one, and the one it replaced the first after
+                # an impact: the two left confirm it (the outlier counted stays one).
+                self._pending, self._pending_innovation = replaced, None
+                if self._confirm_break(frame):
+                    self._rejected[pending[1]] = (pending[0], found)
+                    return 'inserted'
+                # The one judged stray before was not (a new ball): fitted after all.
+                self.stats['outlier'] -= 1
+                self._restart_from(replaced, pending, frame)
+            else:
+                self._restart_from(pending, frame)
             return 'inserted'
         self._pending = frame
         self._pending_innovation = found
         self._pending_doubtful = False
+        self._replaced = None
         return 'pending'
 
     def _doubtful_estimate(self, frame: _Frame) -> Estimate | None:
@@ -1064,20 +1126,21 @@ class TrajectoryFuser(GatedEstimator):
         self._pending = None
         self._break = None
         self._break_range = None
+        self._bounce_check = None
         self._segment += 1
         self._tentative = None
 
-    def _restart_from(self, first: _Frame, second: _Frame) -> None:
+    def _restart_from(self, *frames: _Frame) -> None:
         """
-        Start the path afresh from two detections (``restarts``): the old one is lost.
+        Start the path afresh from two (or three) detections (``restarts``): the old one is lost.
 
         The lost path's estimates no longer bound where the ball can be (a new ball served
         before the rig paused).
         """
         self._restart()
         self.plausibility.reset()
-        self._insert(first)
-        self._insert(second)
+        for frame in frames:
+            self._insert(frame)
         self.stats['restarts'] += 1
 
     def _pending_estimate(self, frame: _Frame) -> Estimate | None:
@@ -1182,6 +1245,8 @@ class TrajectoryFuser(GatedEstimator):
                     best = found
         if best is None:
             return False
+        if not self._jump_plausible(best, int(frame[0]), int(self._stamp[end - 1])):
+            return False
         # The jump must explain both new frames: their residuals within the gate, or at
         # least ten times smaller (squared) than without it (the impact time is only known
         # to a grid step until later frames refine it).
@@ -1196,12 +1261,36 @@ class TrajectoryFuser(GatedEstimator):
         self._break = t_break
         self._rebuild(self._start)
         self._break_range = (low, high)
+        self._bounce_check = None
         self._segment += 1
         self._pending = None
         self.stats['breaks'] += 1
         self._bounce_point = None if bounce is None else \
             self._bounce_estimate(bounce, directions, int(frame[0]), int(frame[1]))
         return True
+
+    def _jump_plausible(self, found: _Break, stamp: int, last: int) -> bool:
+        """
+        Return whether an impact's path is one a bounce or a hit can give.
+
+        A free jump explains any two detections, and next to an impact a stray one needs a
+        velocity jump of tens of m/s.  The jump's size itself depends on its time, which two
+        detections do not fix; the path's distance at ``stamp`` from the path before the
+        impact does not: over the time since the ``last`` fitted frame (the earliest the
+        impact can be) it bounds the jump from below.  That bound must not exceed twice the
+        ball's speed (a bounce or hit reverses it at most) plus :data:`_JUMP_MARGIN_MPS`.
+
+        :param found: the path with the jump (:meth:`_refine_break` at ``stamp``)
+        :param stamp: the newest frame's stamp [ns]
+        :param last: the stamp of the last frame fitted before the impact [ns]
+        """
+        before = self._predict_point(last - 1_000_000)
+        after = self._predict_point(last + 1_000_000)
+        speed = math.dist(before, after) / 0.002
+        _, t_break, beta, _ = found
+        point = _position_row(0, stamp - t_break) @ beta
+        away = math.dist(point.tolist(), self._predict_point(stamp))
+        return away <= (2.0 * speed + _JUMP_MARGIN_MPS) * (stamp - last) * 1e-9
 
     def _snapshot(self) -> _Snapshot:
         """Return the state an impact's confirmation changes (see :meth:`_restore`)."""
@@ -1275,6 +1364,8 @@ class TrajectoryFuser(GatedEstimator):
         if len(after) == 2:
             if self._jump_chi2(before, low, after + [frame], directions) is not None:
                 self._tentative = None  # the usual case: a bounce explains all three
+                # Until detections are gated again, the bounce judges them (_check).
+                self._bounce_check = (before, low, directions, after + [frame])
                 return None
             if self._agrees(state['_path'], frame):  # type: ignore[arg-type]
                 # Back on the path before the impact: both detections were stray.

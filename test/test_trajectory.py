@@ -37,7 +37,8 @@ from pseudo_stereo_ros.errors import FuserConfigError
 from pseudo_stereo_ros.evaluation.holdout import holdout, three_camera_consistency
 from pseudo_stereo_ros.evaluation.sweep import (Case, impact_errors, impact_times, make_rig,
                                                 run_case, run_strays, simulate_case,
-                                                small_cases, summarize, with_strays)
+                                                small_cases, stray_runs, summarize,
+                                                with_strays)
 from pseudo_stereo_ros.evaluation.table1 import Run, run_table1, score, simulate_run
 from pseudo_stereo_ros.formats.bagio import read_observations
 from pseudo_stereo_ros.formats.csv_io import read_estimates
@@ -259,6 +260,80 @@ def test_synchronized_strays_after_an_impact_do_not_confirm_a_second_one():
     assert result.stats['breaks'] == len(impact_times())
     assert result.mae_mm < 1.25 * result.clean_mae_mm
     assert result.max_error_m < 0.1
+
+
+@pytest.mark.parametrize('offset, scenario, fps, seed', [
+    (0.5, 'bounce', 30.0, 24), (0.5, 'bounce', 60.0, 24), (0.5, 'spiral', 30.0, 1),
+    (0.5, 'spiral', 60.0, 9), (0.0, 'bounce', 30.0, 16), (0.0, 'bounce', 60.0, 21),
+    (0.0, 'spiral', 60.0, 5), (0.0, 'spiral', 60.0, 9)])
+def test_wrong_blobs_next_to_an_impact_or_in_a_row_do_not_cascade(offset, scenario, fps, seed):
+    # The eight flights of sweep --strays with an error over 0.5 m (0.52-0.74 m) before
+    # session 18: a wrong blob next to an impact (or two in a row) confirmed an impact with
+    # a jump of 25-100 m/s, or restarted the path from a wrong blob, or was fitted right
+    # after an impact; the lost path then took more.  Now: no impact with a jump a bounce or
+    # hit cannot give, a second detection off the path waits in the first one's place, and a
+    # bounce that explained three detections judges the next until they are gated.
+    result = run_strays(scenario, fps, seed, offset=offset)
+    assert result.stats['outlier'] == result.strays
+    assert result.stats['restarts'] == 0
+    assert result.stats['breaks'] == (len(impact_times()) if scenario == 'bounce' else 0)
+    assert result.max_error_m < 0.1
+    assert result.mae_mm < 0.25 * result.paper_mae_mm
+
+
+def test_stray_runs_no_estimate_half_a_metre_off_and_every_flight_below_paper():
+    # The README's stray runs (sweep --strays: 240 flights, 2 % wrong blobs, 0.3 px noise,
+    # camera 2 half a period late and synchronized).  Before session 18: 8 flights with an
+    # error over 0.5 m (up to 1.10 m) and one at 1.61x paper's MAE.
+    worst = 0.0
+    for offset in (0.5, 0.0):
+        for scenario, fps, seed in stray_runs():
+            result = run_strays(scenario, fps, seed, offset=offset)
+            assert result.mae_mm < 0.95 * result.paper_mae_mm, (offset, scenario, fps, seed)
+            worst = max(worst, result.max_error_m)
+    assert worst < 0.5
+
+
+def racket_hit(after, at=0.45, duration=0.9):
+    """Return a thrown ball hit at ``at`` s: its velocity is then ``after`` [m/s], gravity on."""
+    gravity = np.array((0.0, 0.0, -9.8))
+    start, velocity = np.array((0.5, 1.0, 0.6)), np.array((2.5, -1.0, 2.0))
+    hit_point = start + velocity * at + 0.5 * gravity * at * at
+
+    def position(t):
+        t = np.asarray(t, dtype=float)[:, None]
+        since = np.maximum(t - at, 0.0)
+        return np.where(t < at, start + velocity * t + 0.5 * gravity * t * t,
+                        hit_point + np.asarray(after) * since + 0.5 * gravity * since * since)
+    return Scenario('hit', duration, position, 'a racket hit'), velocity + gravity * at
+
+
+@pytest.mark.parametrize('after', [(-4.0, 1.5, 2.0), (-12.0, 3.0, 4.0), (-16.0, 3.0, 3.0),
+                                   (-20.0, 4.0, 3.0)])
+@pytest.mark.parametrize('fps', [30.0, 60.0])
+def test_a_racket_hit_is_followed(after, fps):
+    # A ball at 3.6 m/s hit back at 4.9-20.6 m/s (velocity jumps of 8-24 m/s): an impact, or
+    # beyond twice the speed plus 15 m/s (the last) a lost path started afresh.  Before the
+    # bound on a jump, the two hardest at 30 fps were worse than paper's MAE (1.13x, 1.18x).
+    scenario, before = racket_hit(after)
+    cameras = default_rig()
+    stamps = [shutter_stamps(fps, scenario.duration_s, phase_s=p) for p in (0.0, 0.5 / fps)]
+    observations = observe(scenario, cameras, stamps, noise_px=0.3, seed=1)
+    truth_stamps = np.unique(np.concatenate(stamps))
+    truth_points = truth_at(scenario, truth_stamps)
+    ours, stats = fuse(cameras, observations, method='trajectory')
+    paper, _ = fuse(cameras, observations)
+    jump = float(np.linalg.norm(np.asarray(after) - before))
+    assert stats['breaks'] + stats['restarts'] == 1
+    assert stats['restarts'] == (jump > 2.0 * float(np.linalg.norm(before)) + 15.0)
+    mine = score(ours, truth_stamps, truth_points).mae_mm
+    assert mine < 0.9 * score(paper, truth_stamps, truth_points).mae_mm
+    # 0.1 s after the hit the path is known again (paper's MAE over these flights: 7-28 mm),
+    # until the ball leaves the view.
+    settled = [e for e in ours if e.stamp_ns > truth_stamps[0] + 550_000_000]
+    index = np.searchsorted(truth_stamps, [e.stamp_ns for e in settled])
+    assert len(settled) >= 2
+    assert np.linalg.norm(positions_array(settled) - truth_points[index], axis=1).max() < 0.025
 
 
 @pytest.mark.parametrize('fps, scenario, noise', [
