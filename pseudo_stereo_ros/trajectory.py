@@ -143,8 +143,8 @@ too old to use.
 Counts: ``observations`` = ``estimates`` + drops (:data:`DROP_REASONS`, the
 paper fuser's plus ``pending``) + ``gate.held`` at all times.  The other keys
 are informational: ``late``, ``breaks``, ``restarts``, ``predicted`` (estimates
-at pending detections, among ``estimates``) and ``outlier`` (pending detections
-later judged stray; their event already counted as an estimate or a drop).
+at pending detections, among ``estimates``) and ``outlier`` (detections judged
+stray, not fitted; their event already counted as an estimate or a drop).
 """
 
 from __future__ import annotations
@@ -195,7 +195,8 @@ DROP_REASONS = {
     'no_partner': 'fewer than two cameras have a detection within their max gap',
     'warming_up': 'too few frames in the flight for a fit yet',
     'degenerate': 'no fit (or prediction) determined well enough (max_uncertainty)',
-    'pending': 'the detection is off the path and pending_estimate is none',
+    'pending': 'the detection is off the path and pending_estimate is none, or it waits in '
+               'the place of one judged stray (where the ball is depends on which was)',
     'implausible': 'the estimate moved faster than max_speed_mps from the previous one, or '
                    'lies outside the workspace box',
 }
@@ -538,7 +539,7 @@ class TrajectoryFuser(GatedEstimator):
         cameras = self.cameras
         names = self.camera_names
         # Counts beyond the shared ones (:attr:`stats`): ``resets``, ``late``, ``breaks``
-        # (impacts), ``outlier`` (pending detections judged stray), ``predicted`` (estimates at
+        # (impacts), ``outlier`` (detections judged stray), ``predicted`` (estimates at
         # pending detections), ``restarts`` (path lost, fitted afresh); see DROP_REASONS.
         for name, value in (('max_window_s', max_window_s), ('consistency', consistency),
                             ('innovation_gate', innovation_gate), ('min_sigma_px', min_sigma_px),
@@ -983,13 +984,15 @@ class TrajectoryFuser(GatedEstimator):
                 # Once a bounce explained the first three (_recheck_impact), it must explain
                 # this one with them: a wrong blob right after an impact, fitted, bent the
                 # jump's path by up to 1.1 m (synchronized cameras, sweep --strays).
-                check = self._bounce_check
+                # It judges one at most: a stray one is not fitted, so no more frames follow
+                # the impact, and a wrong bounce would judge every later detection stray.
+                check, self._bounce_check = self._bounce_check, None
                 if check is not None:
                     before, low, directions, frames = check
                     if self._jump_chi2(before, low, frames + [frame], directions) is None:
                         self.stats['outlier'] += 1
                         return 'stray'
-                    frames.append(frame)
+                    self._bounce_check = (before, low, directions, frames + [frame])
                 return 'ok'
         statistic, found, squared, uncertain = self._statistic(stamp, index, prediction,
                                                                equations)
@@ -1006,6 +1009,7 @@ class TrajectoryFuser(GatedEstimator):
                 self.stats['outlier'] += 1  # the path goes on: the pending one was stray
                 self._rejected[pending[1]] = (pending[0], self._pending_innovation)
                 self._pending = None
+                self._replaced = None
                 return 'ok'
             # Within the gate but unlikely as noise (p ~ 5e-5) against a path known well
             # there: see _doubtful_estimate.  (Let in by the path's own uncertainty, or
@@ -1047,12 +1051,16 @@ class TrajectoryFuser(GatedEstimator):
             if replaced is not None and frame[0] - replaced[0] <= self.gate.rig_gap_ns:
                 # The pending one was the stray one, and the one it replaced the first after
                 # an impact: the two left confirm it (the outlier counted stays one).
+                middle = self._pending_innovation
                 self._pending, self._pending_innovation = replaced, None
                 if self._confirm_break(frame):
-                    self._rejected[pending[1]] = (pending[0], found)
+                    self._rejected[pending[1]] = (pending[0], middle)
+                    self._replaced = None
                     return 'inserted'
                 # The one judged stray before was not (a new ball): fitted after all.
                 self.stats['outlier'] -= 1
+                if self._rejected.get(replaced[1], (None,))[0] == replaced[0]:
+                    del self._rejected[replaced[1]]
                 self._restart_from(replaced, pending, frame)
             else:
                 self._restart_from(pending, frame)
@@ -1124,6 +1132,7 @@ class TrajectoryFuser(GatedEstimator):
         self._weights_guessed = True
         self._path = None
         self._pending = None
+        self._replaced = None
         self._break = None
         self._break_range = None
         self._bounce_check = None
@@ -1276,13 +1285,16 @@ class TrajectoryFuser(GatedEstimator):
         A free jump explains any two detections, and next to an impact a stray one needs a
         velocity jump of tens of m/s.  The jump's size itself depends on its time, which two
         detections do not fix; the path's distance at ``stamp`` from the path before the
-        impact does not: over the time since the ``last`` fitted frame (the earliest the
-        impact can be) it bounds the jump from below.  That bound must not exceed twice the
-        ball's speed (a bounce or hit reverses it at most) plus :data:`_JUMP_MARGIN_MPS`.
+        impact does not.  Over the time since the ``last`` fitted frame, where the path
+        before the impact still held (an impact placed a little before it moved the path
+        there by no more than the noise), it must not exceed twice the ball's speed (a
+        bounce or hit reverses it at most) plus :data:`_JUMP_MARGIN_MPS`.  (Measured since
+        the impact's own time instead, two wrong blobs in a row confirmed one 0.86 m off.)
+        A detection not newer than ``last`` confirms no impact.
 
         :param found: the path with the jump (:meth:`_refine_break` at ``stamp``)
         :param stamp: the newest frame's stamp [ns]
-        :param last: the stamp of the last frame fitted before the impact [ns]
+        :param last: the stamp of the newest frame fitted [ns]
         """
         before = self._predict_point(last - 1_000_000)
         after = self._predict_point(last + 1_000_000)
