@@ -289,7 +289,7 @@ _DOUBT = 20.0
 # a hit reverses it at most) plus this [m/s] (see _jump_plausible): a stray detection next
 # to an impact moved the path by 19-51 m/s times the time since the last fitted frame (the
 # stray runs); the real sessions' bounces and hits by at most 20 m/s, twice their speed plus
-# 7 m/s, the simulated bounces by 9-12 m/s.
+# 7 m/s, the simulated bounces by 9-13 m/s.
 _JUMP_MARGIN_MPS = 15.0
 
 
@@ -642,8 +642,9 @@ class TrajectoryFuser(GatedEstimator):
         # (low, high) [ns] while the impact's time is being refined.
         self._break_range: tuple[int, int] | None = None
         # The bounce that explained the first three detections after an impact, which judges
-        # the next ones until they are gated (see _check): the frames before it, the lower
-        # end of its time's range, its directions, the frames after it so far; or None.
+        # the next ones until they are gated or one is stray (see _check): the frames before
+        # it, the lower end of its time's range, its directions, the frames after it so far;
+        # or None.
         self._bounce_check: tuple[tuple[np.ndarray, ...], int, np.ndarray,
                                   list[_Frame]] | None = None
         self._segment = 0  # counts impacts: residuals are compared within a segment only
@@ -775,9 +776,7 @@ class TrajectoryFuser(GatedEstimator):
             self._pending = None
         else:
             verdict = self._check(frame, prediction, equations)
-            if verdict == 'pending':
-                return self._pending_estimate(frame)
-            if verdict == 'stray':
+            if verdict in ('pending', 'stray'):
                 return self._pending_estimate(frame)
             if verdict == 'replaced':
                 # Where the ball is depends on which of the two was stray: no estimate.
@@ -984,8 +983,9 @@ class TrajectoryFuser(GatedEstimator):
                 # Once a bounce explained the first three (_recheck_impact), it must explain
                 # this one with them: a wrong blob right after an impact, fitted, bent the
                 # jump's path by up to 1.1 m (synchronized cameras, sweep --strays).
-                # It judges one at most: a stray one is not fitted, so no more frames follow
-                # the impact, and a wrong bounce would judge every later detection stray.
+                # It stops at the first one it judges stray: that one is not fitted, so no
+                # more frames follow the impact, and a wrong bounce (a blob among its three)
+                # would judge every later detection stray.
                 check, self._bounce_check = self._bounce_check, None
                 if check is not None:
                     before, low, directions, frames = check
@@ -1031,11 +1031,12 @@ class TrajectoryFuser(GatedEstimator):
             if self._confirm_break(frame):
                 return 'inserted'
             if self._replaced is None:
-                # Only a jump no bounce or hit gives explains the two: one of them is stray
-                # (a wrong blob next to an impact, or two in a row), or the path is lost (a
-                # new ball).  The pending one is taken as stray and this one waits in its
-                # place: the next detection agrees with the path (this one stray too), or
-                # confirms an impact with it, or else the path restarts from the two.
+                # No impact explains the two (or only a jump no bounce or hit gives): one of
+                # them is stray (a wrong blob next to an impact, or two in a row), or the path
+                # is lost (a new ball).  The pending one is taken as stray and this one waits
+                # in its place: the next detection agrees with the path (this one stray too),
+                # or confirms an impact with it or with the replaced one, or else the path
+                # restarts from all three.
                 self.stats['outlier'] += 1
                 self._rejected[pending[1]] = (pending[0], self._pending_innovation)
                 self._pending = frame
@@ -1059,7 +1060,8 @@ class TrajectoryFuser(GatedEstimator):
                     return 'inserted'
                 # The one judged stray before was not (a new ball): fitted after all.
                 self.stats['outlier'] -= 1
-                if self._rejected.get(replaced[1], (None,))[0] == replaced[0]:
+                rejected = self._rejected.get(replaced[1])
+                if rejected is not None and rejected[0] == replaced[0]:
                     del self._rejected[replaced[1]]
                 self._restart_from(replaced, pending, frame)
             else:
