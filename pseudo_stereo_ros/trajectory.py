@@ -1298,9 +1298,7 @@ class TrajectoryFuser(GatedEstimator):
         :param stamp: the newest frame's stamp [ns]
         :param last: the stamp of the newest frame fitted [ns]
         """
-        before = self._predict_point(last - 1_000_000)
-        after = self._predict_point(last + 1_000_000)
-        speed = math.dist(before, after) / 0.002
+        speed = math.hypot(*self._velocity(last))
         _, t_break, beta, _ = found
         point = _position_row(0, stamp - t_break) @ beta
         away = math.dist(point.tolist(), self._predict_point(stamp))
@@ -1490,6 +1488,13 @@ class TrajectoryFuser(GatedEstimator):
         spread = max(self._gate_sigma ** 2, self._spread or 0.0)
         return float(found[0] @ found[0]) <= self.innovation_gate * spread
 
+    def _velocity(self, stamp: int) -> tuple[float, float, float]:
+        """Return the path's velocity at ``stamp`` [m/s] (its positions 1 ms either side)."""
+        before = self._predict_point(stamp - 1_000_000)
+        after = self._predict_point(stamp + 1_000_000)
+        return ((after[0] - before[0]) / 0.002, (after[1] - before[1]) / 0.002,
+                (after[2] - before[2]) / 0.002)
+
     def _bounce_directions(self, stamp: int) -> np.ndarray:
         """
         Return (3, k) directions that span a bounce's velocity jump at ``stamp``.
@@ -1499,9 +1504,7 @@ class TrajectoryFuser(GatedEstimator):
         restitution) and the horizontal direction of its velocity (friction, top or back
         spin); the vertical alone when it has hardly any horizontal speed.
         """
-        before = self._predict_point(stamp - 1_000_000)
-        after = self._predict_point(stamp + 1_000_000)
-        vx, vy = (after[0] - before[0]) / 0.002, (after[1] - before[1]) / 0.002
+        vx, vy, _ = self._velocity(stamp)
         speed = math.hypot(vx, vy)
         if speed > _BOUNCE_MIN_SPEED:
             return np.array(((0.0, vx / speed), (0.0, vy / speed), (1.0, 0.0)))
