@@ -70,6 +70,17 @@ noisy short velocity fit costs little), among acceleration fits with
 ``consistency`` (they run only where the path curves at the longest window's
 scale, so a long window's bias is caught early).
 
+**Jerk.**  Where the acceleration fit is taken and no impact lies in the
+window, constant-jerk fits (a cubic per axis, from prefix sums of their own)
+of the windows of 13 to 40 frames of a pair that span at least 0.15 s join
+Lepski's rule, if the longest one's jerk is significant (Wald's chi-square
+above 30): acceleration and jerk fits in one sequence by decreasing variance,
+the least variable one consistent with every more variable one.  A turning
+path (the spiral's acceleration turns 0.6-0.9 rad over such a span) is
+followed by a cubic over windows where a parabola's bias already shows, so the
+noise is averaged over more frames.  Only the estimate comes from them: the
+path that judges the next detection stays the acceleration fit's.
+
 **A flight's first frames.**  Until the window holds six frames (a flight's
 start, or a restart after the path was lost) the paper's method
 (:class:`pseudo_stereo_ros.fusion.Fuser`, on the same admitted detections)
@@ -183,8 +194,10 @@ DEFAULT_MAX_WINDOW_S = 1.0
 DEFAULT_CONSISTENCY = 8.0
 #: Impact/outlier gate: chi-square (2 degrees of freedom) of a detection's innovation.
 DEFAULT_GATE = 60.0
-#: Floor of the measured detection noise [px].
-DEFAULT_MIN_SIGMA_PX = 0.02
+#: Floor of the measured detection noise [px]: above the 0.05 px rounding floor's 0.014 px,
+#: where a fit's bias dominates its residuals and Lepski's rule would stop at a biased
+#: shortest window on bias alone (0.02 px: three cameras lost to a pair on the spiral).
+DEFAULT_MIN_SIGMA_PX = 0.03
 #: Largest estimate standard deviation, in pixels of the newest camera per pixel of noise.
 DEFAULT_MAX_UNCERTAINTY = 8.0
 
@@ -215,6 +228,17 @@ _CAPACITY = 256
 # Coefficients (12): x0 x1 x2 y0 y1 y2 z0 z1 z2 (powers of tau per axis) and the velocity
 # jump jx jy jz at an impact.  Subsets: constant acceleration, constant velocity.
 _CV = np.array((0, 1, 3, 4, 6, 7))
+# Constant-jerk fits (see _jerk_fits): the shortest time span of their windows [ns] and the
+# chi-square (3 d.o.f.) above which the longest one's jerk is significant.  Without both, the
+# real sessions' medians were 1.67 / 1.33 / 1.76 px instead of 1.58 / 1.21 / 1.70 (a short
+# window's jerk is poorly determined, and the 168 fps detections' noise is not white).
+_JERK_MIN_SPAN_NS = 150_000_000
+_JERK_SIGNIFICANCE = 30.0
+# The entries of the jerk fits' change of time origin that depend on delta (see _jerk_fits),
+# per axis (p, q) of tau^q = sum_p C(q, p) (-delta)^(q - p) tau_reference^p, p < q.
+_JERK_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+_JERK_SHIFT = (np.array([4 * axis + p for axis in range(3) for p, _ in _JERK_PAIRS]),
+               np.array([4 * axis + q for axis in range(3) for _, q in _JERK_PAIRS]))
 #: Gravity [m/s^2] of the free-fall model, along -z of the world frame (9.8 as in the paper
 #: and the simulation; the standard 9.80665 differs by 0.07 %).
 GRAVITY_MPS2 = 9.8
@@ -563,6 +587,8 @@ class TrajectoryFuser(GatedEstimator):
         # (more cameras must not shorten the windows' time spans).
         self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
         self._shortest, self._longest = int(self._windows[0]), int(self._windows[-1])
+        # The constant-jerk fits' windows (see _jerk_fits): 13 to 40 frames of a pair.
+        self._jerk_windows = (int(self._windows[2]), int(self._windows[5]))
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -593,6 +619,10 @@ class TrajectoryFuser(GatedEstimator):
         # Their leading 10 x 10 blocks (the fits without an impact), contiguous: a window's
         # system is then one subtraction of contiguous blocks, ready to multiply.
         self._prefix10 = np.zeros((capacity + 1, 10, 10))
+        # The same for the constant-jerk fits (see _jerk_fits): the coefficients x0 .. x3,
+        # y0 .. y3, z0 .. z3 (powers of tau per axis), then the right-hand side; no jump.
+        self._prefix_jerk = np.zeros((capacity + 1, 13, 13))
+        self._shift_jerk = np.eye(13)  # its change of time origin; _jerk_fits sets delta's
         # The change of time origin (tau -> tau - delta) in the augmented coefficients, per
         # number of unknowns (9 without an impact, 12 with one); _fit sets its delta entries.
         self._shift = {9: np.eye(10), 12: np.eye(13)}
@@ -857,6 +887,15 @@ class TrajectoryFuser(GatedEstimator):
                  b2 * jump * w if jump else 0.0)))
             np.add(prefix[first], design.T @ design, out=prefix[end])
             self._prefix10[end] = prefix[end, :10, :10]
+            tau3 = tau2 * tau
+            design = np.array((
+                (a0 * w, a0 * tau * w, a0 * tau2 * w, a0 * tau3 * w, a1 * w, a1 * tau * w,
+                 a1 * tau2 * w, a1 * tau3 * w, a2 * w, a2 * tau * w, a2 * tau2 * w,
+                 a2 * tau3 * w, q0 * w),
+                (b0 * w, b0 * tau * w, b0 * tau2 * w, b0 * tau3 * w, b1 * w, b1 * tau * w,
+                 b1 * tau2 * w, b1 * tau3 * w, b2 * w, b2 * tau * w, b2 * tau2 * w,
+                 b2 * tau3 * w, q1 * w)))
+            np.add(self._prefix_jerk[first], design.T @ design, out=self._prefix_jerk[end])
             return
         if first == self._start:
             prefix[first] = 0.0
@@ -871,6 +910,20 @@ class TrajectoryFuser(GatedEstimator):
         np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
         prefix[first + 1:end + 1] += prefix[first]
         self._prefix10[first:end + 1] = prefix[first:end + 1, :10, :10]
+        # The constant-jerk fits' prefix sums: the rows times the powers of tau per axis.
+        prefix = self._prefix_jerk
+        if first == self._start:
+            prefix[first] = 0.0
+        taus = ((stamps - reference) / _SCALE_NS)[:, None, None]
+        rows = self._rows[first:end] * weight
+        design = np.empty((end - first, 2, 13))
+        design[:, :, 0:12:4] = rows
+        for power in range(1, 4):
+            rows = rows * taus
+            design[:, :, power:12:4] = rows
+        design[:, :, 12] = self._rhs[first:end] * weight[:, :, 0]
+        np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
+        prefix[first + 1:end + 1] += prefix[first]
 
     # -- the path -------------------------------------------------------------------------------
 
@@ -1680,7 +1733,7 @@ class TrajectoryFuser(GatedEstimator):
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'trajectory')
 
-    def _fit(self, stamp: int, index: int) -> np.ndarray | None:
+    def _fit(self, stamp: int, index: int) -> Sequence[float] | None:
         """Fit the nested windows, choose one (Lepski) and return the position at ``stamp``."""
         start, end = self._start, self._end
         count = end - start
@@ -1753,10 +1806,15 @@ class TrajectoryFuser(GatedEstimator):
                 lower = self._lower_choice(solutions, longest, model, position, sigma2)
             except np.linalg.LinAlgError:  # a shorter window's acceleration block is singular
                 lower = None
+        estimate = None
         if lower is None:
             chosen = self._lepski(points, covariances, sigma2, self.consistency)
             beta, inverse = self._full(*solutions[chosen])
             point, covariance = points[chosen], covariances[chosen]
+            if quadratic and t_break is None:
+                jerk = self._jerk_fits(stamp, index, count, sigma2)
+                if jerk is not None:
+                    estimate = self._with_jerk(points, covariances, *jerk, sigma2)
         else:  # the noise estimate below uses the lower-order fits too
             beta, inverse, point, covariance, points, covariances = lower
         coefficients = beta.tolist()
@@ -1781,7 +1839,65 @@ class TrajectoryFuser(GatedEstimator):
             if reference < len(kept_sizes):
                 self._measure_noise(stamp, index, _standardized(
                     rows, rhs, weight, points[reference], covariances[reference]))
-        return point
+        return point if estimate is None else estimate
+
+    def _jerk_fits(self, stamp: int, index: int, count: int,
+                   sigma2: float) -> tuple[list, list] | None:
+        """
+        Return constant-jerk fits' positions at ``stamp`` and covariances, or None.
+
+        Windows of the nested sizes from 13 to 40 frames of a pair, spanning at least
+        ``_JERK_MIN_SPAN_NS``, from prefix sums of their own (see :meth:`_rebuild`); None
+        without one, or unless the longest one's jerk is significant (Wald's chi-square,
+        3 d.o.f., above ``_JERK_SIGNIFICANCE``).
+
+        :return: ``(points, covariances)`` as :meth:`_fits` gives them, shortest window first
+        """
+        end = self._end
+        sizes = _sizes(count, self._windows)
+        shortest, longest = self._jerk_windows
+        sizes = sizes[(sizes >= shortest) & (sizes <= longest)]
+        if len(sizes):
+            sizes = sizes[stamp - self._stamp[end - sizes] >= _JERK_MIN_SPAN_NS]
+        if not len(sizes):
+            return None
+        # A difference of prefix sums, moved from the reference stamp's coefficients to the
+        # event's: tau^q -> (tau - delta)^q, binomially, per axis.
+        assert self._reference is not None, 'the window holds frames, so _insert set the reference'
+        delta = (stamp - self._reference) / _SCALE_NS
+        shift = self._shift_jerk
+        square = delta * delta
+        shift[_JERK_SHIFT] = (-delta, square, -square * delta, -2.0 * delta, 3.0 * square,
+                              -3.0 * delta) * 3
+        prefix = self._prefix_jerk
+        systems = np.matmul(np.matmul(shift.T, prefix[end] - prefix.take(end - sizes, axis=0)),
+                            shift)
+        kept = self._fits(np.ascontiguousarray(systems[:, :12, :12]),
+                          np.ascontiguousarray(systems[:, :12, 12]), sizes, 12, _POSITION,
+                          index, picks=4)
+        if kept is None:
+            return None
+        solutions = kept[3]
+        assert isinstance(solutions, _Solutions)
+        (a, b, c), (_, e, f), (_, _, i) = solutions.inverses[-1][3::4, 3::4].tolist()
+        x, y, z = solutions.betas[-1][3::4].tolist()
+        if _inverse_form(x, y, z, a, b, c, e, f, i) <= _JERK_SIGNIFICANCE * sigma2:
+            return None
+        return kept[1], kept[2]
+
+    def _with_jerk(self, points: list, covariances: list, jerk_points: list,
+                   jerk_covariances: list, sigma2: float) -> list[float]:
+        """
+        Return the position Lepski's rule chooses among acceleration and jerk fits.
+
+        Both families' fits in one sequence by decreasing variance (the trace of the
+        covariance): the least variable fit consistent with every more variable one.
+        """
+        fits = sorted(zip(points + jerk_points, covariances + jerk_covariances),
+                      key=lambda fit: -(fit[1][0][0] + fit[1][1][1] + fit[1][2][2]))
+        chosen = self._lepski([point for point, _ in fits],
+                              [covariance for _, covariance in fits], sigma2, self.consistency)
+        return fits[chosen][0]
 
     @staticmethod
     def _lower_model(beta: np.ndarray, inverse: np.ndarray, sigma2: float) -> int | None:
@@ -1889,7 +2005,8 @@ class TrajectoryFuser(GatedEstimator):
             self._weights_guessed = False
 
     def _fits(self, matrices: np.ndarray, moments: np.ndarray, sizes: np.ndarray,
-              columns: int | np.ndarray, position: np.ndarray, index: int) -> _Fits | None:
+              columns: int | np.ndarray, position: np.ndarray, index: int, *,
+              picks: int | None = None) -> _Fits | None:
         """
         Solve window systems; keep the determined, well-conditioned ones.
 
@@ -1900,12 +2017,16 @@ class TrajectoryFuser(GatedEstimator):
             array (already applied to ``matrices`` and ``moments``)
         :param position: (3, 12) map from the coefficients to the position at the event
         :param index: the event's camera
+        :param picks: with ``columns`` a count: the coefficients per axis, the position being
+            the first of each (4: the constant-jerk fits; ``position`` is then unused)
         :return: ``(sizes, points, covariances per px^2, solutions)``: the kept windows'
             sizes, positions at the event (3 floats each) and their covariances (3 x 3
             nested lists), with ``solutions[k] = (columns, beta (m,), inverse (m, m))``;
             or None
         """
-        if isinstance(columns, int):
+        if picks is not None:
+            count = columns
+        elif isinstance(columns, int):
             count = columns
             if matrices.shape[1] != count:
                 matrices, moments = matrices[:, :count, :count], moments[:, :count]

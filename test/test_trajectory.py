@@ -85,6 +85,33 @@ def test_exact_on_a_parabola_with_any_offset(delta12):
     assert errors_of(paper, scenario).mean() > 1e-4
 
 
+def constant_jerk(duration=0.6):
+    """Return a path with a constant jerk (a cubic per axis), in view of both cameras."""
+    def position(t):
+        t = np.asarray(t, dtype=float)
+        return np.column_stack((0.5 + 2.5 * t + 3.0 * t ** 3, 1.0 - 1.0 * t - 2.0 * t ** 3,
+                                0.6 + 4.0 * t - 4.9 * t * t - 2.0 * t ** 3))
+    return Scenario('constant jerk', duration, position, 'a cubic per axis')
+
+
+@pytest.mark.parametrize('fps', [30.0, 60.0])
+def test_exact_on_a_constant_jerk_path_once_the_windows_span_its_jerk(fps):
+    # The jerk fits' windows span at least 0.15 s (13 frames of a pair, 0.2 s, at 30 fps):
+    # from 0.3 s on they hold the path exactly (to round-off: their prefix sums are moved
+    # over up to 1.4 s); the acceleration fits alone were 9-16 mm off (a parabola cannot
+    # follow a jerk of 12-18 m/s^3).  Neither impacts nor outliers: the jerk does not trip
+    # the gate.
+    cameras = default_rig()
+    scenario = constant_jerk()
+    stamps = [shutter_stamps(fps, scenario.duration_s, phase_s=p) for p in (0.0, 0.5 / fps)]
+    observations = observe(scenario, cameras, stamps, quantization_px=0.0)
+    estimates, stats = fuse(cameras, observations, method='trajectory')
+    assert stats['outlier'] == stats['breaks'] == stats['restarts'] == 0
+    assert len(estimates) >= 0.9 * len(observations)
+    settled = [e for e in estimates if e.stamp_ns >= stamps[0][0] + 300_000_000]
+    assert errors_of(settled, scenario).max() < 1e-6
+
+
 def test_same_input_rules_and_drop_reasons_as_the_paper_fuser():
     cameras = default_rig()
     scenario = parabola()
@@ -161,12 +188,24 @@ def test_sweep_every_case_covered_better_than_paper_and_bounded(sweep):
 
 def test_sweep_meets_the_issue_ratio_bars(sweep):
     # The issue's bars. Caveat: Lepski's bounds (8 among parabolas, 16 among lower-order fits)
-    # were chosen on sweeps that include these 12 cases, and this one passes with little margin
-    # (0.399). On cases with other seeds and offsets (not in the suite) the same code gave a
-    # geometric mean of 0.384x and a worst case of 0.99x, over the 0.95x bar (README).
+    # were chosen on sweeps that include these 12 cases; cases with other seeds and offsets
+    # (not in the suite) are in the README ("Simulation").
     summary = summarize(sweep)
     assert summary['geometric_mean_ratio'] <= 0.4
     assert summary['worst_ratio'] < 0.95
+
+
+@pytest.mark.parametrize('rig, seed', [('default', 1010), ('wide', 1058), ('distorted', 1106)])
+def test_noisy_jittered_spirals_at_30_fps_below_the_bar(rig, seed):
+    # Three cases of the unseen sweep (``sweep --full --offsets 0.4 0.2 --seed-offset 1000``):
+    # noisy 30 fps spirals with jittered shutters and drops.  Over the windows the noise needs
+    # a parabola cannot follow the turning acceleration: with acceleration fits only they were
+    # 0.950x, 0.959x and 0.989x paper's MAE.  Constant-jerk fits in Lepski's sequence follow it
+    # (0.84x, 0.76x, 0.88x).
+    result = run_case(Case(rig, 30.0, 0.4, 0.3, True, 'spiral', seed=seed))
+    assert result.ratio < 0.95, result.ratio
+    assert result.coverage >= 0.9
+    assert result.max_error_m < 0.5
 
 
 def test_table1_trajectory_rows_at_most_half_of_proposed():
