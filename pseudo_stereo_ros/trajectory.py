@@ -240,6 +240,10 @@ _JERK_SIGNIFICANCE = 30.0
 _JERK_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
 _JERK_SHIFT = (np.array([4 * axis + p for axis in range(3) for p, _ in _JERK_PAIRS]),
                np.array([4 * axis + q for axis in range(3) for _, q in _JERK_PAIRS]))
+# Their values are C(q, p) (-1)^(q - p) times delta^(q - p): (factor, power) per pair.
+_JERK_TERMS = tuple((math.comb(q, p) * (-1) ** (q - p), q - p) for p, q in _JERK_PAIRS)
+# The jerk fits' shortest and longest windows [frames of a pair; C cameras: C / 2 times as many].
+_JERK_WINDOWS = (13, 40)
 #: Gravity [m/s^2] of the free-fall model, along -z of the world frame (9.8 as in the paper
 #: and the simulation; the standard 9.80665 differs by 0.07 %).
 GRAVITY_MPS2 = 9.8
@@ -589,7 +593,8 @@ class TrajectoryFuser(GatedEstimator):
         self._windows = np.unique(np.round(_WINDOWS * max(len(names), 2) / 2.0).astype(int))
         self._shortest, self._longest = int(self._windows[0]), int(self._windows[-1])
         # The constant-jerk fits' windows (see _jerk_fits): 13 to 40 frames of a pair.
-        self._jerk_windows = (int(self._windows[2]), int(self._windows[5]))
+        self._jerk_windows = tuple(int(round(size * max(len(names), 2) / 2.0))
+                                   for size in _JERK_WINDOWS)
         self._cameras = {camera.name: camera for camera in cameras}
         self._index = {name: index for index, name in enumerate(names)}
         self._rotation = np.array([camera.R for camera in cameras], dtype=float)  # (C, 3, 3)
@@ -685,7 +690,8 @@ class TrajectoryFuser(GatedEstimator):
         # its time's range, a bounce's directions there, and the frames after it so far.
         self._tentative: tuple[_Snapshot, tuple[np.ndarray, ...], int, np.ndarray,
                                list[_Frame]] | None = None
-        # Running spread of accepted innovations, per axis [px^2].
+        # Running spread of accepted innovations (within the gate without the prediction's
+        # own variance), per axis [px^2].
         self._spread: float | None = None
         # Camera index -> its newest residual in the fit.
         self._residual: dict[int, _Residual] = {}
@@ -888,15 +894,17 @@ class TrajectoryFuser(GatedEstimator):
                  b2 * jump * w if jump else 0.0)))
             np.add(prefix[first], design.T @ design, out=prefix[end])
             self._prefix10[end] = prefix[end, :10, :10]
-            tau3 = tau2 * tau
-            design = np.array((
-                (a0 * w, a0 * tau * w, a0 * tau2 * w, a0 * tau3 * w, a1 * w, a1 * tau * w,
-                 a1 * tau2 * w, a1 * tau3 * w, a2 * w, a2 * tau * w, a2 * tau2 * w,
-                 a2 * tau3 * w, q0 * w),
-                (b0 * w, b0 * tau * w, b0 * tau2 * w, b0 * tau3 * w, b1 * w, b1 * tau * w,
-                 b1 * tau2 * w, b1 * tau3 * w, b2 * w, b2 * tau * w, b2 * tau2 * w,
-                 b2 * tau3 * w, q1 * w)))
-            np.add(self._prefix_jerk[first], design.T @ design, out=self._prefix_jerk[end])
+            if self.order == 2:  # the jerk fits' (see _jerk_fits)
+                tau3 = tau2 * tau
+                design = np.array((
+                    (a0 * w, a0 * tau * w, a0 * tau2 * w, a0 * tau3 * w, a1 * w, a1 * tau * w,
+                     a1 * tau2 * w, a1 * tau3 * w, a2 * w, a2 * tau * w, a2 * tau2 * w,
+                     a2 * tau3 * w, q0 * w),
+                    (b0 * w, b0 * tau * w, b0 * tau2 * w, b0 * tau3 * w, b1 * w, b1 * tau * w,
+                     b1 * tau2 * w, b1 * tau3 * w, b2 * w, b2 * tau * w, b2 * tau2 * w,
+                     b2 * tau3 * w, q1 * w)))
+                np.add(self._prefix_jerk[first], design.T @ design,
+                       out=self._prefix_jerk[end])
             return
         if first == self._start:
             prefix[first] = 0.0
@@ -911,6 +919,8 @@ class TrajectoryFuser(GatedEstimator):
         np.cumsum(design.transpose(0, 2, 1) @ design, axis=0, out=prefix[first + 1:end + 1])
         prefix[first + 1:end + 1] += prefix[first]
         self._prefix10[first:end + 1] = prefix[first:end + 1, :10, :10]
+        if self.order != 2:
+            return
         # The constant-jerk fits' prefix sums: the rows times the powers of tau per axis.
         prefix = self._prefix_jerk
         if first == self._start:
@@ -1850,12 +1860,14 @@ class TrajectoryFuser(GatedEstimator):
         """
         Return constant-jerk fits' positions at ``stamp`` and covariances, or None.
 
-        Windows of the nested sizes from 13 to 40 frames of a pair, spanning at least
-        ``_JERK_MIN_SPAN_NS``, from prefix sums of their own (see :meth:`_rebuild`); None
-        without one, or unless the longest one's jerk is significant (Wald's chi-square,
-        3 d.o.f., above ``_JERK_SIGNIFICANCE``).
+        Windows of the nested sizes from 13 to 40 frames of a pair (``_JERK_WINDOWS``)
+        reaching back at least ``_JERK_MIN_SPAN_NS`` from the event's stamp, from prefix
+        sums of their own (see :meth:`_rebuild`); None without one, or unless the jerk of
+        the longest window kept is significant (Wald's chi-square, 3 d.o.f., above
+        ``_JERK_SIGNIFICANCE``).
 
         :return: ``(points, covariances)`` as :meth:`_fits` gives them, shortest window first
+            (the solutions are cubic coefficients, x0 .. x3 y0 .. z3: not for :meth:`_full`)
         """
         end = self._end
         sizes = _sizes(count, self._windows)
@@ -1870,9 +1882,7 @@ class TrajectoryFuser(GatedEstimator):
         assert self._reference is not None, 'the window holds frames, so _insert set the reference'
         delta = (stamp - self._reference) / _SCALE_NS
         shift = self._shift_jerk
-        square = delta * delta
-        shift[_JERK_SHIFT] = (-delta, square, -square * delta, -2.0 * delta, 3.0 * square,
-                              -3.0 * delta) * 3
+        shift[_JERK_SHIFT] = [factor * delta ** power for factor, power in _JERK_TERMS] * 3
         prefix = self._prefix_jerk
         systems = np.matmul(np.matmul(shift.T, prefix[end] - prefix.take(end - sizes, axis=0)),
                             shift)
