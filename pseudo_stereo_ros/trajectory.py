@@ -231,8 +231,9 @@ _CAPACITY = 256
 _CV = np.array((0, 1, 3, 4, 6, 7))
 # Constant-jerk fits (see _jerk_fits): the shortest time span of their windows [ns] and the
 # chi-square (3 d.o.f.) above which the longest one's jerk is significant.  Without both, the
-# real sessions' medians were 1.67 / 1.33 / 1.76 px instead of 1.58 / 1.21 / 1.70 (a short
-# window's jerk is poorly determined, and the 168 fps detections' noise is not white).
+# real sessions' medians were 1.67 / 1.33 / 1.76 px instead of 1.58 / 1.21 / 1.70 (measured
+# before the running spread's change below: a short window's jerk is poorly determined, and
+# the 168 fps detections' noise is not white).
 _JERK_MIN_SPAN_NS = 150_000_000
 _JERK_SIGNIFICANCE = 30.0
 # The entries of the jerk fits' change of time origin that depend on delta (see _jerk_fits),

@@ -189,7 +189,7 @@ def test_sweep_every_case_covered_better_than_paper_and_bounded(sweep):
 def test_sweep_meets_the_issue_ratio_bars(sweep):
     # The issue's bars. Caveat: Lepski's bounds (8 among parabolas, 16 among lower-order fits)
     # were chosen on sweeps that include these 12 cases; cases with other seeds and offsets
-    # (not in the suite) are in the README ("Simulation").
+    # (not in the suite) are in the README ("Varied cases").
     summary = summarize(sweep)
     assert summary['geometric_mean_ratio'] <= 0.4
     assert summary['worst_ratio'] < 0.95
