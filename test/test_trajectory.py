@@ -208,6 +208,16 @@ def test_noisy_jittered_spirals_at_30_fps_below_the_bar(rig, seed):
     assert result.max_error_m < 0.5
 
 
+def test_noisy_spiral_on_the_wide_rig_below_the_bar():
+    # A case of a fresh sweep (``sweep --full --offsets 0.45 0.25 --seed-offset 4000``), the
+    # only one of its 144 over the bar before: on the wide rig paper's own MAE is low (2.2 mm).
+    # Lepski's sequence of parabolas and cubics alone: 0.981x paper.  With the mean of the
+    # parabolas' choice and the cubics' own where that sequence takes a parabola: 0.939x.
+    result = run_case(Case('wide', 30.0, 0.45, 0.3, False, 'spiral', seed=4055))
+    assert result.ratio < 0.95, result.ratio
+    assert result.coverage >= 0.9
+
+
 def test_table1_trajectory_rows_at_most_half_of_proposed():
     table = run_table1(default_rig())
     for column in table['proposed']:
@@ -408,7 +418,8 @@ def test_a_racket_hit_is_followed(after, fps):
     # Not held: the straight line at 60 fps with 0.05 px rounding only (0.034 mm against
     # 0.033 for pair 1-3): at the rounding floor this one offset's rounding pattern favours
     # the pair; at six of seven offsets from 0.2 to 0.45 of a period the three cameras win
-    # (0.75x-0.96x the best pair; README, "Three cameras").
+    # (0.75x-0.96x the best pair; README, "Three cameras"), and with random noise of the
+    # rounding's size on every seed (the next test).
     if (fps, scenario, noise) != (60.0, 'straight', 0.0)])
 def test_three_cameras_beat_every_pair(fps, scenario, noise):
     # At 60 fps (three cameras: 180 Hz) the bounce without noise needs an impact placed in
@@ -420,6 +431,30 @@ def test_three_cameras_beat_every_pair(fps, scenario, noise):
     everything, _ = fuse(cameras, observations, method='trajectory')
     events = len({o.stamp_ns for o in observations})
     assert len(everything) >= 0.9 * events  # the output rate is the sum of the rates
+    three = score(everything, truth_stamps, truth_points).mae_mm
+    for pair in itertools.combinations(cameras, 2):
+        names = {camera.name for camera in pair}
+        estimates, _ = fuse(list(pair), [o for o in observations if o.camera in names],
+                            method='trajectory')
+        assert three < score(estimates, truth_stamps, truth_points).mae_mm, names
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_three_cameras_beat_every_pair_on_a_straight_line_at_the_rounding_floors_noise(seed):
+    # The row the test above leaves out, with the rounding replaced by random noise of its
+    # size (0.05 px / sqrt(12)).  On a straight line at a constant image velocity the rounding
+    # error is periodic from frame to frame (camera_1's u moves about 93.5 steps of 0.05 px
+    # per frame), so over a window it has a mean, a bias more cameras do not average out;
+    # random noise of the same size does (three cameras: 0.81x the best pair, geometric mean
+    # over these seeds).
+    cameras = make_rig('three')
+    scenario = make_scenario('straight')
+    stamps = [shutter_stamps(60.0, scenario.duration_s, phase_s=k / 180.0) for k in range(3)]
+    observations = observe(scenario, cameras, stamps, noise_px=0.05 / math.sqrt(12.0),
+                           quantization_px=0.0, seed=seed)
+    truth_stamps = np.unique(np.concatenate(stamps))
+    truth_points = truth_at(scenario, truth_stamps)
+    everything, _ = fuse(cameras, observations, method='trajectory')
     three = score(everything, truth_stamps, truth_points).mae_mm
     for pair in itertools.combinations(cameras, 2):
         names = {camera.name for camera in pair}
