@@ -432,7 +432,7 @@ _POSITION.flags.writeable = False
 
 
 def _trace(fit: tuple) -> float:
-    """Return the trace of a fit's position covariance (a (point, covariance) pair)."""
+    """Return the trace of a fit's position covariance (a (point, covariance, ...) tuple)."""
     covariance = fit[1]
     return covariance[0][0] + covariance[1][1] + covariance[2][2]
 
