@@ -83,8 +83,8 @@ acceleration fit (no parabola's bias shows yet) and three or more cubic
 windows reach back 0.15 s (camera rates up to about 60 fps), the estimate is
 the mean of the parabolas' own choice by Lepski's rule and the cubics': their
 errors (a parabola's bias, a short cubic's noise) are partly independent, so
-the mean is closer than either on the noisy spirals, and a path a cubic fits
-exactly keeps the cubic.  Only the estimate comes from them: the path that
+on the noisy spirals the mean is closer on average than either, and a path a
+cubic fits exactly keeps the cubic.  Only the estimate comes from them: the path that
 judges the next detection stays the acceleration fit's.
 
 **A flight's first frames.**  Until the window holds six frames (a flight's
