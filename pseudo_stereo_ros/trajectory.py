@@ -783,6 +783,8 @@ class TrajectoryFuser(GatedEstimator):
         the returning camera's detections stray; unless another camera's detection is
         pending and the two confirm an impact (a camera silent across a bounce).
         """
+        if not (fresh or late):
+            fresh = self._unheard(index, stamp)
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = self._rotation_rows[index]
         r0, r1, r2 = self._rotated_center[index]
         equations = ((a0 - x * c0, a1 - x * c1, a2 - x * c2),
@@ -843,6 +845,30 @@ class TrajectoryFuser(GatedEstimator):
                 return self._doubtful_estimate(frame)
         self._insert(frame)
         return self._estimate(stamp, index)
+
+    def _unheard(self, index: int, stamp: int) -> bool:
+        """
+        Return True if the path has had no frame of this camera for longer than its max gap.
+
+        The gate's ``fresh`` measures a camera's silence by the detections that arrived; the
+        path knows only those it fitted.  A camera whose detections were all judged stray
+        over its max gap was silent for the path: the other cameras' rays alone carried it,
+        and along them the depth drifted, so that each of its detections was further off
+        than the one before and judged stray too (near-synchronized cameras with jitter and
+        drops at 60 fps: 0.22 m off before a restart).  Its next detection corrects the path,
+        as a returning camera's does.
+        """
+        previous = self._previous.get(index)
+        gap = self.gate.max_gaps[self._names[index]]
+        rejected = self._rejected.get(index)
+        if previous is None or stamp - previous > gap or rejected is None or \
+                rejected[0] != previous:
+            # Silent by the gate's measure too, a first detection, or a previous one not
+            # judged stray (fitted, or still pending).
+            return False
+        start, end = self._start, self._end
+        mine = np.flatnonzero(self._camera[start:end] == index)
+        return len(mine) > 0 and stamp - int(self._stamp[start + mine[-1]]) > gap
 
     # -- frames ---------------------------------------------------------------------------------
 
