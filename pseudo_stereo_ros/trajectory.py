@@ -134,7 +134,10 @@ the rig paused).  A camera's first detection after a silence longer than its
 max gap is fitted without gating: meanwhile the path drifted along the other
 cameras' rays, where they cannot see, and they would judge the returning
 camera's detections stray; unless another camera's detection is pending and the
-two confirm an impact (a camera silent across a bounce).
+two confirm an impact (a camera silent across a bounce).  So is a camera the path
+lost while its detections arrived: none fitted over its max gap, the last two
+taken as outliers off the path the same way and growing, one other camera alone
+carrying the path (its depth drifted along that camera's rays; see ``_unheard``).
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
@@ -247,6 +250,9 @@ _JERK_SIGNIFICANCE = 30.0
 # real sessions' 168 fps unless detections are missing (with two, n1_n1's p90 was 1.094x the
 # oracle's instead of 1.059x; with one, n3_p1_v14's 1.22x instead of 1.075x).
 _JERK_AVERAGE_MIN = 3
+# Two innovations of a camera's detections taken as outliers point the same way within this
+# cosine (30 degrees) where the path drifts off its rays (see _unheard).
+_DRIFT_COSINE = math.cos(math.pi / 6.0)
 # The entries of the jerk fits' change of time origin that depend on delta (see _jerk_fits),
 # per axis (p, q) of tau^q = sum_p C(q, p) (-delta)^(q - p) tau_reference^p, p < q.
 _JERK_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
@@ -435,6 +441,16 @@ def _trace(fit: tuple) -> float:
     """Return the trace of a fit's position covariance (a (point, covariance, ...) tuple)."""
     covariance = fit[1]
     return covariance[0][0] + covariance[1][1] + covariance[2][2]
+
+
+def _drifting(older: tuple[float, float] | None, newer: tuple[float, float] | None) -> bool:
+    """Return True if two innovations [px] point the same way (30 degrees), not shrinking."""
+    if older is None or newer is None:
+        return False
+    (o0, o1), (n0, n1) = older, newer
+    size_older, size_newer = math.hypot(o0, o1), math.hypot(n0, n1)
+    return size_older <= size_newer and \
+        o0 * n0 + o1 * n1 >= _DRIFT_COSINE * size_older * size_newer
 
 
 def _raise_singular(error: str, flag: int) -> None:
@@ -715,6 +731,9 @@ class TrajectoryFuser(GatedEstimator):
         self._residual: dict[int, _Residual] = {}
         # Camera index -> (stamp, innovation or None) of its last detection taken as an outlier.
         self._rejected: dict[int, tuple[int, tuple[float, float] | None]] = {}
+        # Camera index -> innovations of its detections taken as outliers since its newest
+        # fitted frame (see _unheard).
+        self._strays: dict[int, list[tuple[float, float] | None]] = {}
         # Camera index -> stamp of its detection before the newest (None: it had none).
         self._previous: dict[int, int | None] = {}
         # Camera index -> the same as _residual from the noise estimate's fixed-length fit.
@@ -781,7 +800,8 @@ class TrajectoryFuser(GatedEstimator):
         its max gap), is fitted without gating: while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
         the returning camera's detections stray; unless another camera's detection is
-        pending and the two confirm an impact (a camera silent across a bounce).
+        pending and the two confirm an impact (a camera silent across a bounce).  A camera
+        the path lost although its detections arrived counts as fresh (:meth:`_unheard`).
         """
         if not (fresh or late):
             fresh = self._unheard(index, stamp)
@@ -846,17 +866,25 @@ class TrajectoryFuser(GatedEstimator):
         self._insert(frame)
         return self._estimate(stamp, index)
 
+    def _judged_stray(self, index: int, stamp: int,
+                      innovation: tuple[float, float] | None) -> None:
+        """Record a camera's detection taken as an outlier (not fitted)."""
+        self._rejected[index] = (stamp, innovation)
+        self._strays.setdefault(index, []).append(innovation)
+
     def _unheard(self, index: int, stamp: int) -> bool:
         """
-        Return True if the path has had no frame of this camera for longer than its max gap.
+        Return True if the path has lost this camera: it drifted off that camera's rays.
 
         The gate's ``fresh`` measures a camera's silence by the detections that arrived; the
-        path knows only those it fitted.  A camera whose detections were all judged stray
-        over its max gap was silent for the path: the other cameras' rays alone carried it,
-        and along them the depth drifted, so that each of its detections was further off
-        than the one before and judged stray too (near-synchronized cameras with jitter and
-        drops at 60 fps: 0.22 m off before a restart).  Its next detection corrects the path,
-        as a returning camera's does.
+        path knows only those it fitted.  Where this camera's detections were taken as
+        outliers over its max gap while one other camera alone carried the path, the depth
+        along that camera's rays drifted, and each detection of this camera was further off
+        than the one before, the same way, and taken as an outlier too (near-synchronized
+        cameras with jitter and drops at 60 fps: 0.22 m off before a restart).  Then its
+        next detection corrects the path, as a returning camera's does.  Stray detections
+        scatter: the last two taken as outliers must point the same way (within 30
+        degrees), the newer not the smaller; and with two other cameras the depth is known.
         """
         previous = self._previous.get(index)
         gap = self.gate.max_gaps[self._names[index]]
@@ -864,11 +892,17 @@ class TrajectoryFuser(GatedEstimator):
         if previous is None or stamp - previous > gap or rejected is None or \
                 rejected[0] != previous:
             # Silent by the gate's measure too, a first detection, or a previous one not
-            # judged stray (fitted, or still pending).
+            # taken as an outlier (fitted, or still pending).
+            return False
+        strays = self._strays.get(index, [])
+        if len(strays) < 2 or not _drifting(strays[-2], strays[-1]):
             return False
         start, end = self._start, self._end
-        mine = np.flatnonzero(self._camera[start:end] == index)
-        return len(mine) > 0 and stamp - int(self._stamp[start + mine[-1]]) > gap
+        cameras = self._camera[start:end]
+        mine = np.flatnonzero(cameras == index)
+        if not len(mine) or stamp - int(self._stamp[start + mine[-1]]) <= gap:
+            return False
+        return len(np.unique(cameras[mine[-1] + 1:])) <= 1  # one other camera carried it
 
     # -- frames ---------------------------------------------------------------------------------
 
@@ -892,6 +926,7 @@ class TrajectoryFuser(GatedEstimator):
             for array in self._arrays():
                 array[position + 1:end + 1] = array[position:end].copy()
             rebuild = position if rebuild is None else rebuild
+        self._strays.pop(index, None)  # fitted again
         self._stamp[position] = stamp
         self._camera[position] = index
         self._rows[position] = rows
@@ -1118,7 +1153,7 @@ class TrajectoryFuser(GatedEstimator):
         if agrees:
             if pending is not None:
                 self.stats['outlier'] += 1  # the path goes on: the pending one was stray
-                self._rejected[pending[1]] = (pending[0], self._pending_innovation)
+                self._judged_stray(pending[1], pending[0], self._pending_innovation)
                 self._pending = None
                 self._replaced = None
                 return 'ok'
@@ -1149,7 +1184,7 @@ class TrajectoryFuser(GatedEstimator):
                 # or confirms an impact with it or with the replaced one, or else the path
                 # restarts from all three.
                 self.stats['outlier'] += 1
-                self._rejected[pending[1]] = (pending[0], self._pending_innovation)
+                self._judged_stray(pending[1], pending[0], self._pending_innovation)
                 self._pending = frame
                 self._pending_innovation = found
                 self._pending_doubtful = False
@@ -1166,7 +1201,7 @@ class TrajectoryFuser(GatedEstimator):
                 middle = self._pending_innovation
                 self._pending, self._pending_innovation = replaced, None
                 if self._confirm_break(frame):
-                    self._rejected[pending[1]] = (pending[0], middle)
+                    self._judged_stray(pending[1], pending[0], middle)
                     self._replaced = None
                     return 'inserted'
                 # The one judged stray before was not (a new ball): fitted after all.
@@ -1422,6 +1457,7 @@ class TrajectoryFuser(GatedEstimator):
         state['frames'] = tuple(array[start:end].copy() for array in self._arrays())
         state['residual'] = dict(self._residual)
         state['rejected'] = dict(self._rejected)
+        state['strays'] = {index: list(strays) for index, strays in self._strays.items()}
         state['depth'] = list(self._depth)
         return state
 
@@ -1440,6 +1476,8 @@ class TrajectoryFuser(GatedEstimator):
             array[start:end] = saved
         self._residual = dict(state['residual'])  # type: ignore[call-overload]
         self._rejected = dict(state['rejected'])  # type: ignore[call-overload]
+        strays: dict[int, list] = state['strays']  # type: ignore[assignment]
+        self._strays = {index: list(innovations) for index, innovations in strays.items()}
         self._depth = list(state['depth'])  # type: ignore[call-overload]
         # Residuals of the undone segments are not this segment's (the noise estimate).
         self._noise_residual = {camera: residual for camera, residual

@@ -224,8 +224,9 @@ def test_a_camera_judged_stray_over_its_max_gap_corrects_the_path():
     # camera_1 detection was judged stray, camera_2 alone carried the path and its depth
     # along camera_2's rays drifted, so each camera_1 detection was further off than the one
     # before (1, 2, 7, 18, 21 px) and judged stray too, until a restart 117 ms later: 0.22 m
-    # off, 3.3x paper's MAE.  Now a camera whose detections were all judged stray over its max
-    # gap corrects the path like a returning one (32 mm at most, 0.56x).
+    # off, 3.3x paper's MAE.  Now a camera the path lost that way (none of its detections
+    # fitted over its max gap, the last two off the same way and growing, one other camera
+    # carrying the path) corrects it like a returning one (32 mm at most, 0.58x).
     result = run_case(Case('distorted', 60.0, 0.05, 0.0, True, 'spiral', seed=5136))
     assert result.max_error_m < 0.1, result.max_error_m
     assert result.ratio < 0.95, result.ratio
