@@ -218,7 +218,7 @@ def test_noisy_spiral_on_the_wide_rig_below_the_bar():
     assert result.coverage >= 0.9
 
 
-def test_a_camera_judged_stray_over_its_max_gap_corrects_the_path():
+def test_a_camera_the_path_drifted_off_corrects_it():
     # A case of a sweep with near-synchronized cameras (``sweep --full --offsets 0.15 0.05
     # --seed-offset 5000``): 60 fps, offset 0.05 of a period, jitter and drops.  After one
     # camera_1 detection was judged stray, camera_2 alone carried the path and its depth
