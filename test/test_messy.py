@@ -1,0 +1,73 @@
+# Copyright 2026 The pseudo_stereo_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Messy input on near-synchronized cameras (``pseudo_stereo sweep --messy``), a tenth of its cases.
+
+Bounds: no estimate is ever non-finite and the counts always balance (the package's rules for
+bad input); ``trajectory``'s mean MAE under every perturbation stays below ``paper``'s on the
+same input (a peer); where a perturbation moves no detection (duplicates, NaN pixels, a
+silent camera, streamed arrival) no estimate is over 0.5 m off (issue 11's bar for clean
+cases).  Perturbations that do move detections (wrong blobs, bursts, stamps shifted back)
+still give errors over 0.5 m in some runs (README, "Messy input"): no bound is claimed there.
+"""
+
+from pseudo_stereo_ros.evaluation.messy import (LARGE_ERROR_M, messy_cases, perturb,
+                                                PERTURBATIONS, run_messy, summarize_messy)
+from pseudo_stereo_ros.evaluation.sweep import Case, make_rig, simulate_case
+import pytest
+
+# Perturbations that move no detection: the clean cases' bar holds for them.
+_HARMLESS = ('clean', 'duplicates', 'non_finite', 'silent', 'streamed')
+
+
+@pytest.fixture(scope='module')
+def summary():
+    results = [run_messy(case, perturbation) for case in messy_cases()[::10]
+               for perturbation in PERTURBATIONS]
+    return summarize_messy(results)
+
+
+def test_every_perturbation_keeps_counts_and_finite_estimates(summary):
+    assert set(summary) == set(PERTURBATIONS)
+    for perturbation, row in summary.items():
+        assert row['non_finite'] == 0, perturbation
+        assert row['unbalanced'] == 0, perturbation
+
+
+def test_trajectory_below_paper_under_every_perturbation(summary):
+    for perturbation, row in summary.items():
+        assert row['mae_mm'] < row['paper_mae_mm'], (perturbation, row)
+
+
+@pytest.mark.parametrize('perturbation', _HARMLESS)
+def test_perturbations_that_move_no_detection_keep_the_bar(summary, perturbation):
+    assert summary[perturbation]['largest_m'] < LARGE_ERROR_M, summary[perturbation]
+
+
+def test_perturb_changes_what_it_says():
+    case = Case('default', 30.0, 0.05, 0.0, True, 'straight', seed=1)
+    cameras = make_rig(case.rig)
+    observations, _, _ = simulate_case(case, cameras)
+    start = min(o.stamp_ns for o in observations)
+    silent, streamed = perturb(observations, 'silent', fps=30.0, cameras=cameras, seed=0)
+    assert not streamed
+    assert not [o for o in silent if o.camera == 'camera2'
+                and start + 3e8 <= o.stamp_ns <= start + 6e8]
+    assert len(silent) < len(observations)
+    arrival, streamed = perturb(observations, 'streamed', fps=30.0, cameras=cameras, seed=0)
+    assert streamed and sorted(arrival) == sorted(observations)
+    assert [o.stamp_ns for o in arrival] != sorted(o.stamp_ns for o in arrival)
+    with pytest.raises(ValueError, match='unknown perturbation'):
+        perturb(observations, 'gremlins', fps=30.0, cameras=cameras, seed=0)
