@@ -101,7 +101,7 @@ class PlausibilityGate:
             raise FuserConfigError(f'max_speed_mps must be >= 0 m/s (0: no speed test), got '
                                    f'{max_speed_mps!r}')
         #: Fastest plausible speed [m/s]; 0 when the speed test is off.
-        self.max_speed_mps = float(max_speed_mps)
+        self.max_speed_mps: float = float(max_speed_mps)
         # Reach per ns of elapsed time [m/ns]; None when the speed test is off.
         self._speed: float | None = (self.max_speed_mps * 1e-9
                                      if 0 < self.max_speed_mps < math.inf else None)

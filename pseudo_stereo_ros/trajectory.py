@@ -130,14 +130,17 @@ once.  Windows that reach back past the impact carry the jump; frames before an
 earlier impact are dropped.  Two disagreeing detections that no jump explains
 mean the path is lost: the fit restarts from them (``restarts``), and the lost
 path's estimates no longer bound the plausible speed (a new ball served before
-the rig paused).  A camera's first detection after a silence longer than its
-max gap is fitted without gating: meanwhile the path drifted along the other
+the rig paused).  A camera's first detection after a silence longer than its max
+gap is fitted without gating: meanwhile the path drifted along the other
 cameras' rays, where they cannot see, and they would judge the returning
 camera's detections stray; unless another camera's detection is pending and the
-two confirm an impact (a camera silent across a bounce).  So is a camera the path
-lost while its detections arrived: none fitted over its max gap, the last two
-taken as outliers off the path the same way and growing, one other camera alone
-carrying the path (its depth drifted along that camera's rays; see ``_unheard``).
+two confirm an impact, or (one other camera having carried the path) it lies off
+the path across the image of that camera's rays, where no drift moves it: then
+it is judged as any detection (a camera silent across a bounce).  A camera the
+path lost while its detections arrived is taken as fresh too: none fitted over
+its max gap, the last two taken as outliers off the path the same way and
+growing, one other camera alone carrying the path (its depth drifted along that
+camera's rays; see ``_unheard``).
 
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
@@ -151,7 +154,9 @@ and timing rules of :class:`~pseudo_stereo_ros.timing.InputGate` (validation,
 image margin, measured frame periods and max gaps, stamp outliers, sessions:
 :attr:`TrajectoryFuser.gate`), and every estimate the physical plausibility
 gate of :mod:`pseudo_stereo_ros.plausibility` (``max_speed_mps``, the
-optional workspace box), exactly as for :class:`pseudo_stereo_ros.fusion.Fuser`.
+optional workspace box), exactly as for :class:`pseudo_stereo_ros.fusion.Fuser`;
+and no impact is confirmed, nor a free jump's position taken, off a path
+faster than ``max_speed_mps`` (a fit of too few frames that diverged).
 A new session (the cameras agree on a jump of their stamps, or the rig
 resumes after a pause) starts a new flight: the window, the path and the
 impacts are forgotten, the measured noise is kept.  A camera that comes back
@@ -800,7 +805,8 @@ class TrajectoryFuser(GatedEstimator):
         its max gap), is fitted without gating: while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
         the returning camera's detections stray; unless another camera's detection is
-        pending and the two confirm an impact (a camera silent across a bounce).  A camera
+        pending and the two confirm an impact (a camera silent across a bounce), or it is
+        off the path across what such a drift explains (:meth:`_seen_off_path`).  A camera
         the path lost although its detections arrived counts as fresh (:meth:`_unheard`).
         """
         if not (fresh or late):
@@ -811,6 +817,9 @@ class TrajectoryFuser(GatedEstimator):
                      (b0 - y * c0, b1 - y * c1, b2 - y * c2), (r0 - x * r2, r1 - y * r2))
         rows = np.array(equations[:2])
         rhs = np.array(equations[2])
+        if fresh and not late and self._path is not None and \
+                self._seen_off_path(index, stamp, equations):
+            fresh = False  # off the path where the drift cannot explain it: judged
         if self._tentative is not None:
             held = self._recheck_impact(index, stamp, rows, rhs, late or fresh)
             if held is not None:
@@ -865,6 +874,50 @@ class TrajectoryFuser(GatedEstimator):
                 return self._doubtful_estimate(frame)
         self._insert(frame)
         return self._estimate(stamp, index)
+
+    def _seen_off_path(self, index: int, stamp: int,
+                       equations: tuple[tuple[float, ...], ...]) -> bool:
+        """
+        Return True if a fresh detection is off the path across what a drift could explain.
+
+        A fresh detection is fitted without gating because, while one other camera alone
+        carried the path, the path drifted along that camera's rays, where it cannot see.
+        Such a drift moves the prediction, in this camera's image, along the image of the
+        carrier's ray through it (the epipolar line); across that line the path is still
+        known.  Beyond the gate there, the detection is judged as any other (a camera
+        silent across a bounce: its first detection after the impact, fitted without
+        gating into the falling ball's path, put the path 1.7 m off; judged, it confirms
+        the impact with the next detection).  With two or more other cameras carrying the
+        path, or before detections are gated, a fresh detection stays unjudged.
+        """
+        start, end = self._start, self._end
+        if self._gate_sigma is None or end - start < _GATE_SUPPORT:
+            return False
+        cameras = self._camera[start:end]
+        mine = np.flatnonzero(cameras == index)
+        carriers = np.unique(cameras[mine[-1] + 1:] if len(mine) else cameras)
+        carriers = carriers[carriers != index]
+        if len(carriers) != 1:
+            return False
+        prediction = self._predict_point(stamp)
+        statistic, found, _, _ = self._statistic(stamp, index, prediction, equations)
+        if found is None or not statistic > self.innovation_gate:
+            return False
+        point = np.array(prediction)
+        innovation = self._innovation(index, np.array(equations[:2]), np.array(equations[2]),
+                                      point)
+        if innovation is None:
+            return False
+        # The image direction of the carrier's ray through the prediction [px per m].
+        along = innovation[1] @ (point - self._center[int(carriers[0])])
+        norm2 = float(along @ along)
+        offset = np.array(found)
+        size2 = float(offset @ offset)
+        if not norm2 > 0.0 or not size2 > 0.0:
+            return False
+        across = offset - along * float(offset @ along) / norm2
+        # The statistic's share across the line (the spread taken as the same both ways).
+        return statistic * float(across @ across) / size2 > self.innovation_gate
 
     def _judged_stray(self, index: int, stamp: int,
                       innovation: tuple[float, float] | None) -> None:
@@ -1444,11 +1497,34 @@ class TrajectoryFuser(GatedEstimator):
         :param stamp: the newest frame's stamp [ns]
         :param last: the stamp of the newest frame fitted [ns]
         """
-        speed = math.hypot(*self._velocity(last))
         _, t_break, beta, _ = found
-        point = _position_row(0, stamp - t_break) @ beta
-        away = math.dist(point.tolist(), self._predict_point(stamp))
+        return self._reachable((_position_row(0, stamp - t_break) @ beta).tolist(), stamp, last)
+
+    def _reachable(self, point: Sequence[float], stamp: int, last: int) -> bool:
+        """
+        Return whether an impact after ``last`` can carry the ball to ``point`` by ``stamp``.
+
+        Its distance from the path's prediction must not exceed twice the ball's speed at
+        ``last`` plus :data:`_JUMP_MARGIN_MPS`, times the time since ``last`` (see
+        :meth:`_jump_plausible`); and a path faster than ``max_speed_mps`` is no ball's (a
+        path fitted to a burst of wrong blobs and a few frames diverged to 2,900 m/s, and
+        an impact off it put an estimate 339 m off).
+        """
+        speed = math.hypot(*self._velocity(last))
+        fastest = self.plausibility.max_speed_mps
+        if fastest and not speed <= fastest:
+            return False
+        away = math.dist(point, self._predict_point(stamp))
         return away <= (2.0 * speed + _JUMP_MARGIN_MPS) * (stamp - last) * 1e-9
+
+    def _reachable_before(self, state: _Snapshot, point: Sequence[float], stamp: int,
+                          last: int) -> bool:
+        """Return :meth:`_reachable` by the path before a tentative impact (its snapshot)."""
+        current, self._path = self._path, state['_path']  # type: ignore[assignment]
+        try:
+            return self._reachable(point, stamp, last)
+        finally:
+            self._path = current
 
     def _snapshot(self) -> _Snapshot:
         """Return the state an impact's confirmation changes (see :meth:`_restore`)."""
@@ -1539,7 +1615,8 @@ class TrajectoryFuser(GatedEstimator):
             estimate = self._pending_estimate(frame)
             free = self._jump_chi2(before, low, after)
             if estimate is None and self.pending_estimate != 'none' and free is not None and \
-                    np.all(np.isfinite(free[1])):
+                    np.all(np.isfinite(free[1])) and self._reachable_before(
+                        state, free[1].tolist(), stamp, int(before[0][-1])):
                 # The prediction is not known well enough (right after the impact), but a
                 # free jump explains the three (a hit, a bounce with side spin): its position.
                 self.stats['degenerate'] -= 1  # not dropped after all

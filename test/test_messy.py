@@ -26,6 +26,8 @@ still give errors over 0.5 m in some runs (README, "Messy input"): no bound is c
 from pseudo_stereo_ros.evaluation.messy import (LARGE_ERROR_M, messy_cases, perturb,
                                                 PERTURBATIONS, run_messy, summarize_messy)
 from pseudo_stereo_ros.evaluation.sweep import Case, make_rig, simulate_case
+from pseudo_stereo_ros.plausibility import DEFAULT_MAX_SPEED_MPS
+from pseudo_stereo_ros.sim.scenarios import make_scenario
 import pytest
 
 # Perturbations that move no detection: the clean cases' bar holds for them.
@@ -71,3 +73,33 @@ def test_perturb_changes_what_it_says():
     assert [o.stamp_ns for o in arrival] != sorted(o.stamp_ns for o in arrival)
     with pytest.raises(ValueError, match='unknown perturbation'):
         perturb(observations, 'gremlins', fps=30.0, cameras=cameras, seed=0)
+
+
+def test_a_camera_silent_across_a_bounce_confirms_the_impact():
+    # Camera 2 is silent from 0.3 s to 0.6 s of a falling ball (distorted rig, 30 fps, offset
+    # 0.03) and returns just after the floor impact.  Its first detection, fresh, used to be
+    # fitted without gating into the falling path: 1.70 m off, MAE 19.7 mm against paper's
+    # 1.45.  It is off the path across the image of camera 1's rays, where the path's drift
+    # while camera 1 alone carried it cannot move it, so it is judged and confirms the impact
+    # with the next detection (31 mm at most, MAE 0.31 mm).
+    case = next(c for c in messy_cases() if c.seed == 9128)
+    assert (case.rig, case.fps, case.offset, case.scenario) == ('distorted', 30.0, 0.03,
+                                                                'bounce')
+    result = run_messy(case, 'silent')
+    assert result.max_error_m < LARGE_ERROR_M, result
+    assert result.mae_mm < 0.95 * result.paper_mae_mm, result
+
+
+def test_a_path_faster_than_any_ball_confirms_no_impact():
+    # Bursts of wrong blobs across a bounce (distorted rig, 30 fps, synchronized): fits of a
+    # few frames diverged to a path at 2,900 m/s, and a free jump off it, taken as the
+    # estimate of a held detection, was 339 m off.  No path faster than max_speed_mps
+    # confirms an impact now.  (Found with the previous test's change: before it this run
+    # took another course, 1.9 m at most.)  The bound: no ball is farther from where it
+    # was than the fastest one flies in the whole flight.
+    case = next(c for c in messy_cases() if c.seed == 9122)
+    assert (case.rig, case.fps, case.offset, case.scenario) == ('distorted', 30.0, 0.0,
+                                                                'bounce')
+    result = run_messy(case, 'bursts')
+    assert result.max_error_m < DEFAULT_MAX_SPEED_MPS * make_scenario('bounce').duration_s, \
+        result
