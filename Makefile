@@ -52,4 +52,4 @@ PYTHON_COMPAT ?= python3.12
 compat:
 	test -x $(COMPAT_VENV)/bin/python || $(PYTHON_COMPAT) -m venv $(COMPAT_VENV)
 	$(COMPAT_VENV)/bin/python -m pip install --quiet 'numpy==1.26.4' 'opencv-python-headless==4.6.0.66' 'scipy==1.11.4' pyyaml matplotlib rosbags pytest hypothesis $(QUIET_PIP)
-	PYTHONPATH=$(CURDIR) $(COMPAT_VENV)/bin/python -m pytest -p no:cacheprovider test/test_fusion.py test/test_timing.py test/test_fuser_properties.py test/test_geometry.py test/test_calibration.py test/test_table1.py test/test_cli.py
+	PYTHONPATH=$(CURDIR) $(COMPAT_VENV)/bin/python -m pytest -p no:cacheprovider test/test_fusion.py test/test_timing.py test/test_fuser_properties.py test/test_geometry.py test/test_calibration.py test/test_table1.py test/test_cli.py test/test_messy.py
