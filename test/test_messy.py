@@ -17,10 +17,13 @@ Messy input on near-synchronized cameras (``pseudo_stereo sweep --messy``), a te
 
 Bounds: no estimate is ever non-finite and the counts always balance (the package's rules for
 bad input); ``trajectory``'s mean MAE under every perturbation stays below ``paper``'s on the
-same input (a peer); where a perturbation moves no detection (duplicates, NaN pixels, a
-silent camera, streamed arrival) no estimate is over 0.5 m off (issue 11's bar for clean
-cases).  Perturbations that do move detections (wrong blobs, bursts, stamps shifted back)
-still give errors over 0.5 m in some runs (README, "Messy input"): no bound is claimed there.
+same input and its mean coverage at least ``paper``'s (a peer); where a perturbation adds no
+wrong position that a fuser keeps (copies at a detection's own stamp are dropped as
+duplicates; NaN pixels are dropped; a camera goes silent; arrival is reordered) no estimate
+is over 0.5 m off, and where it drops no detection either, coverage stays at least 90 % in
+every run (issue 11's bars for clean cases).  Perturbations that put wrong positions in
+(wrong blobs, bursts, stamps shifted back) still give errors over 0.5 m in some runs (README,
+"Messy input"): no bound is claimed there.
 """
 
 from pseudo_stereo_ros.evaluation.messy import (LARGE_ERROR_M, messy_cases, perturb,
@@ -30,8 +33,10 @@ from pseudo_stereo_ros.plausibility import DEFAULT_MAX_SPEED_MPS
 from pseudo_stereo_ros.sim.scenarios import make_scenario
 import pytest
 
-# Perturbations that move no detection: the clean cases' bar holds for them.
+# Perturbations that put no wrong position in: the clean cases' bar on errors holds for them;
+# of those, the ones that drop no detection keep the coverage bar too.
 _HARMLESS = ('clean', 'duplicates', 'non_finite', 'silent', 'streamed')
+_LOSSLESS = ('clean', 'duplicates', 'streamed')
 
 
 @pytest.fixture(scope='module')
@@ -51,11 +56,14 @@ def test_every_perturbation_keeps_counts_and_finite_estimates(summary):
 def test_trajectory_below_paper_under_every_perturbation(summary):
     for perturbation, row in summary.items():
         assert row['mae_mm'] < row['paper_mae_mm'], (perturbation, row)
+        assert row['coverage'] >= row['paper_coverage'], (perturbation, row)
 
 
 @pytest.mark.parametrize('perturbation', _HARMLESS)
-def test_perturbations_that_move_no_detection_keep_the_bar(summary, perturbation):
+def test_perturbations_without_wrong_positions_keep_the_bar(summary, perturbation):
     assert summary[perturbation]['largest_m'] < LARGE_ERROR_M, summary[perturbation]
+    if perturbation in _LOSSLESS:
+        assert summary[perturbation]['lowest_coverage'] >= 0.9, summary[perturbation]
 
 
 def test_perturb_changes_what_it_says():
@@ -91,15 +99,28 @@ def test_a_camera_silent_across_a_bounce_confirms_the_impact():
 
 
 def test_a_path_faster_than_any_ball_confirms_no_impact():
-    # Bursts of wrong blobs across a bounce (distorted rig, 30 fps, synchronized): fits of a
-    # few frames diverged to a path at 2,900 m/s, and a free jump off it, taken as the
-    # estimate of a held detection, was 339 m off.  No path faster than max_speed_mps
-    # confirms an impact now.  (Found with the previous test's change: before it this run
-    # took another course, 1.9 m at most.)  The bound: no ball is farther from where it
-    # was than the fastest one flies in the whole flight.
+    # Bursts of wrong blobs across a bounce (distorted rig, 30 fps, synchronized; the draw
+    # that found it): impacts were confirmed off fits of a few frames until the path ran at
+    # 2,900 m/s, and a free jump off it, the estimate of a held detection, was 339 m off.  No
+    # path faster than max_speed_mps confirms an impact now (1.46 m at most).  Found with the
+    # previous test's change; before it this run took another course (0.99 m at most).  The
+    # bound: no estimate is farther off than the fastest ball flies in the whole flight.
     case = next(c for c in messy_cases() if c.seed == 9122)
     assert (case.rig, case.fps, case.offset, case.scenario) == ('distorted', 30.0, 0.0,
                                                                 'bounce')
-    result = run_messy(case, 'bursts')
+    result = run_messy(case, 'bursts', seed=2325404069)
     assert result.max_error_m < DEFAULT_MAX_SPEED_MPS * make_scenario('bounce').duration_s, \
         result
+
+
+def test_a_free_jump_out_of_reach_is_no_estimate():
+    # 10 % wrong blobs on the wide rig, 30 fps, offset 0.08, bouncing ball: after an impact
+    # confirmed from two detections, the third was held and its estimate taken from a free
+    # jump explaining the three, 3.57 m off.  Now that position must be within an impact's
+    # reach of the path before it (twice the speed plus _JUMP_MARGIN_MPS since the last
+    # frame fitted), as a confirmed impact must: 0.17 m at most.  Bound: paper's largest
+    # error on the same input (0.25 m).
+    case = next(c for c in messy_cases() if c.seed == 9080)
+    assert (case.rig, case.fps, case.offset, case.scenario) == ('wide', 30.0, 0.08, 'bounce')
+    result = run_messy(case, 'strays10')
+    assert result.max_error_m < result.paper_max_error_m, result
