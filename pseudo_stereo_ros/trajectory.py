@@ -156,7 +156,8 @@ image margin, measured frame periods and max gaps, stamp outliers, sessions:
 gate of :mod:`pseudo_stereo_ros.plausibility` (``max_speed_mps``, the
 optional workspace box), exactly as for :class:`pseudo_stereo_ros.fusion.Fuser`;
 and off a path faster than ``max_speed_mps`` (a fit of too few frames that
-diverged) no impact is confirmed and no free jump's position taken.
+diverged) no impact is confirmed, nor a free jump's position taken (which must
+also lie within an impact's reach of the path before it).
 A new session (the cameras agree on a jump of their stamps, or the rig
 resumes after a pause) starts a new flight: the window, the path and the
 impacts are forgotten, the measured noise is kept.  A camera that comes back
@@ -177,7 +178,8 @@ from __future__ import annotations
 
 import bisect
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+import contextlib
 import itertools
 import math
 from typing import TypeAlias
@@ -1527,9 +1529,15 @@ class TrajectoryFuser(GatedEstimator):
     def _reachable_before(self, state: _Snapshot, point: Sequence[float], stamp: int,
                           last: int) -> bool:
         """Return :meth:`_reachable` by the path before a tentative impact (its snapshot)."""
-        current, self._path = self._path, state['_path']  # type: ignore[assignment]
-        try:
+        with self._judged_by(state['_path']):  # type: ignore[arg-type]
             return self._reachable(point, stamp, last)
+
+    @contextlib.contextmanager
+    def _judged_by(self, path: _Path) -> Iterator[None]:
+        """Make another path the one that predicts (:meth:`_predict_point`), for a while."""
+        current, self._path = self._path, path
+        try:
+            yield
         finally:
             self._path = current
 
@@ -1711,9 +1719,8 @@ class TrajectoryFuser(GatedEstimator):
 
     def _agrees(self, path: _Path, frame: _Frame) -> bool:
         """Return whether a detection is within the gate of a path's prediction."""
-        current, self._path = self._path, path
-        point = np.array(self._predict_point(frame[0]))
-        self._path = current
+        with self._judged_by(path):
+            point = np.array(self._predict_point(frame[0]))
         found = self._innovation(frame[1], frame[2], frame[3], point)
         if found is None:
             return False
