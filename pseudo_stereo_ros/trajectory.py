@@ -142,6 +142,11 @@ its max gap, the last two taken as outliers off the path the same way and
 growing, one other camera alone carrying the path (its depth drifted along that
 camera's rays; see ``_unheard``).
 
+A late detection (older than the newest frame fitted: streamed cameras with
+different latencies) is fitted without gating too, estimated at its own stamp,
+unless it lies off the path there across the image of the one other camera's
+rays: then it is an outlier (``outlier``), its estimate the prediction.
+
 **Conditioning.**  A fit whose estimate has a standard deviation above
 ``max_uncertainty`` pixels of the newest camera per pixel of noise is not
 used (when one camera stops seeing the ball, its last rays would be
@@ -803,8 +808,11 @@ class TrajectoryFuser(GatedEstimator):
         """
         Add a detection (normalized x, y) to the fit; return the estimate or None.
 
-        A ``late`` detection, or a ``fresh`` one (its camera was silent for longer than
-        its max gap), is fitted without gating: while the other cameras saw the ball alone
+        A ``late`` detection (older than the newest frame fitted) is fitted without gating
+        unless it is off the path across what a drift explains (:meth:`_seen_off_path`;
+        then it is an outlier, its estimate the prediction at its stamp).  A ``fresh`` one
+        (its camera was silent for longer than its max gap) is fitted without gating:
+        while the other cameras saw the ball alone
         the path drifted where they cannot see (along their rays), and they would judge
         the returning camera's detections stray; unless another camera's detection is
         pending and the two confirm an impact (a camera silent across a bounce), or it is
@@ -854,6 +862,15 @@ class TrajectoryFuser(GatedEstimator):
         frame = (stamp, index, rows, rhs, self._focal_list[index] / depth)
         if late:
             self.stats['late'] += 1  # fitted without gating, estimated at its own stamp
+            if not fresh and prediction is not None and self._pending is None and \
+                    self._tentative is None and self._break_range is None and \
+                    self._seen_off_path(index, stamp, equations):
+                # Off the path at its own stamp where no drift explains it (a wrong blob
+                # arriving after a newer detection: streamed near-synchronized cameras with
+                # different latencies deliver many of one camera's detections late).
+                self.stats['outlier'] += 1
+                x, y, z = prediction
+                return Estimate(stamp, self._names[index], x, y, z, 'predicted')
         elif fresh:
             # The path is corrected by this detection, not judged; but if another camera's
             # detection is pending, the two may show an impact while this camera was silent.
@@ -880,17 +897,19 @@ class TrajectoryFuser(GatedEstimator):
     def _seen_off_path(self, index: int, stamp: int,
                        equations: tuple[tuple[float, ...], ...]) -> bool:
         """
-        Return True if a fresh detection is off the path across what a drift could explain.
+        Return True if a detection is off the path across what a drift could explain.
 
         A fresh detection is fitted without gating because, while one other camera alone
-        carried the path, the path drifted along that camera's rays, where it cannot see.
+        carried the path, the path drifted along that camera's rays, where it cannot see
+        (and a late one, because newer detections of the other camera moved the path).
         Such a drift moves the prediction, in this camera's image, along the image of the
         carrier's ray through it (the epipolar line); across that line the path is still
         known.  Beyond the gate there, the detection is judged as any other (a camera
         silent across a bounce: its first detection after the impact, fitted without
         gating into the falling ball's path, put the path 1.7 m off; judged, it confirms
         the impact with the next detection).  With two or more other cameras carrying the
-        path, or before detections are gated, a fresh detection stays unjudged.
+        path, or before detections are gated, a fresh detection stays unjudged.  A late
+        detection off the path there is taken as an outlier (see :meth:`_fit_frame`).
         """
         if self._gate_sigma is None or self._end - self._start < _GATE_SUPPORT:
             return False
