@@ -463,6 +463,9 @@ class FileSource(_OpenCvSource):
         self._pass_offset_ns = 0.0  # added to the file times of this pass
         self._last_time_ns: float | None = None  # file time of the previous frame of this pass
         self._start: tuple[int, int] | None = None  # (system ns, stamp ns) of the first frame
+        #: How late [s] the first frame was for its stamp when a given epoch had already passed
+        #: (it then plays at the file's pace from its first read); None otherwise.
+        self.late_start_s: float | None = None
         self.period_ns: float | None = None
         self.settings: dict[str, int | float] = {}
 
@@ -548,6 +551,8 @@ class FileSource(_OpenCvSource):
             # Stamps in the future: release each frame at its stamp, so files given one epoch
             # play in step; else at the file's pace from now.
             self._start = (first, first) if first >= now else (now, first)
+            if self.realtime and first < now:
+                self.late_start_s = (now - first) / 1e9
         # Float ns within the file (exact to well under 1 ns for hours), integer stamps.
         stamp_ns = self.epoch_ns + int(round(self._pass_offset_ns + time_ns))
         if self.realtime:

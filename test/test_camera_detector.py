@@ -125,21 +125,13 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
         videos.append((name, path, len(frames)))
 
     namespace = _namespace()
-    # Both files start at one epoch in the future (camera2's 1/60 s later): they play in step.
-    epoch = time.time_ns() + 4_000_000_000
-    processes = [subprocess.Popen(
-        [str(BIN / 'camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
-         '-p', 'source:=file', '-p', f'video_file:={path}', '-p', 'loop:=false',
-         '-p', f'epoch_ns:={epoch + round(index * 1e9 / 60)}',
-         '-p', f'calibration_file:={RIG / f"{name}.yaml"}', '-p', 'wait_for_subscribers_s:=30.0',
-         # The fuser and the probe: DDS matches each on its own, up to seconds apart.
-         '-p', 'min_subscribers:=2'],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        for index, (name, path, _) in enumerate(videos)]
     points, positions = [], []
     fuser = None
+    processes = []
     try:
-        # A reorder window longer than the two processes' start-up skew: nothing comes late.
+        # The fuser and the probe first: the detectors' wait for subscribers then only waits
+        # for their own start-up and DDS matching. A reorder window longer than the two
+        # processes' start-up skew: nothing comes late.
         fuser = FuserNode(context=context, namespace=namespace, parameter_overrides=[
             Parameter('camera_names', value=['camera1', 'camera2']),
             Parameter('calibration_files', value=[str(RIG / 'camera1.yaml'),
@@ -152,6 +144,20 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
                 lambda msg, name=name: points.append(point_to_observation(msg, name)), 100)
         probe.create_subscription(PointStamped, 'ball/position',
                                   lambda msg: positions.append(point_to_xyz(msg)), 100)
+        # Both files start at one epoch in the future (camera2's 1/60 s later): they play in
+        # step. A detector that starts after its epoch plays from its own start (and warns,
+        # checked below): in CI one once did, and the fuser saw two flights a second apart.
+        epoch = time.time_ns() + 6_000_000_000
+        processes = [subprocess.Popen(
+            [str(BIN / 'camera_detector'), '--ros-args', '-r', f'__ns:=/{namespace}/{name}',
+             '-p', 'source:=file', '-p', f'video_file:={path}', '-p', 'loop:=false',
+             '-p', f'epoch_ns:={epoch + round(index * 1e9 / 60)}',
+             '-p', f'calibration_file:={RIG / f"{name}.yaml"}',
+             '-p', 'wait_for_subscribers_s:=30.0',
+             # The fuser and the probe: DDS matches each on its own, up to seconds apart.
+             '-p', 'min_subscribers:=2'],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            for index, (name, path, _) in enumerate(videos)]
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(fuser)
         executor.add_node(probe)
@@ -176,6 +182,8 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
         for process in processes:
             process.terminate()
         logs = [process.communicate(timeout=10)[1] for process in processes]
+    late_starts = [line for log in logs for line in log.splitlines() if 'in the past' in line]
+    assert not late_starts, f'a detector started after its epoch (a slow start-up): {late_starts}'
     assert fuser.buffer.stats['late'] == 0
     # Stamps are the files' frame times from the epoch, whatever the playback timing.
     for index, (name, _, count) in enumerate(videos):

@@ -421,6 +421,28 @@ def test_files_with_a_future_epoch_play_at_their_stamps(video):
     source.start()
     for frame in _read(source, 4):
         assert frame.available_ns >= frame.stamp_ns
+    assert source.late_start_s is None
+
+
+def test_a_file_started_after_its_epoch_says_how_late_and_plays_from_its_start(video):
+    # Another file given the same epoch and started on time is out of step by this much: the
+    # camera_detector warns with it.
+    clock = [10_000_000_000]
+    source = FileSource(str(video), epoch_ns=8_500_000_000, realtime=True, loop=False,
+                        system_ns=lambda: clock[0])
+    source.start()
+    waits = []
+
+    def wait(seconds):
+        waits.append(seconds)
+        clock[0] += round(seconds * 1e9)
+        return False
+
+    frames = [source.read(wait) for _ in range(3)]
+    assert source.late_start_s == pytest.approx(1.5)
+    assert [f.stamp_ns for f in frames] == [8_500_000_000 + round(k * 1e9 / 30) for k in range(3)]
+    # At the file's pace from the first read, not all at once to catch up.
+    assert waits == pytest.approx([1 / 30, 1 / 30], abs=1e-6)
 
 
 def test_file_errors_name_the_file(tmp_path):

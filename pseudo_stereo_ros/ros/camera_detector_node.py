@@ -343,6 +343,13 @@ class CameraDetectorNode(Node):
                     f'{self.source.description}: the driver gives no usable capture stamp; '
                     'stamping with the time read() returned (later than the shutter by the '
                     'driver latency: set stamp_offset_s)')
+            elif isinstance(self.source, FileSource) and self.source.late_start_s:
+                self.get_logger().warning(
+                    f'{self.source.description}: parameter epoch_ns was '
+                    f'{self.source.late_start_s:.3f} s in the past at the first frame: playing '
+                    "at the file's pace from now, stamps from the epoch; files given the same "
+                    'epoch are out of step by their start-up difference (give one further '
+                    'ahead)')
             self._stamp_source = frame.stamp_source
         if error is not None:
             self._last_image = None
