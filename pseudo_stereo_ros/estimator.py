@@ -34,7 +34,7 @@ from .camera import Camera
 from .errors import FuserConfigError
 from .plausibility import DEFAULT_MAX_SPEED_MPS, PlausibilityGate
 from .records import Estimate, Observation
-from .timing import Admitted, InputGate, stamp_sort_key
+from .timing import Admitted, INPUT_DROP_REASONS, InputGate, stamp_sort_key
 
 __all__ = ['GatedEstimator', 'camera_list', 'estimator_class']
 
@@ -91,6 +91,9 @@ class GatedEstimator:
 
     #: The methods a subclass implements, registered for :func:`estimator_class`.
     methods: tuple[str, ...] = ()
+    #: Why an observation gave no estimate: reason (a key of :attr:`stats`) -> what it means.
+    #: Each method extends the input gate's reasons with its own.
+    drop_reasons: Mapping[str, str] = INPUT_DROP_REASONS
 
     def __init_subclass__(cls, **kwargs) -> None:
         """Register a method's class under its :attr:`methods`."""
@@ -123,6 +126,22 @@ class GatedEstimator:
         self.max_sync_tolerance_ns = self.gate.max_sync_tolerance_ns
         #: The configured upper bound of the max gap [ns].
         self.max_gap_ns = self.gate.max_gap_ns
+
+    def dropped(self) -> dict[str, int]:
+        """Return the observations dropped so far, per reason (the reasons that occurred)."""
+        return {reason: self.stats[reason] for reason in self.drop_reasons
+                if self.stats[reason]}
+
+    def unaccounted(self) -> int:
+        """
+        Return the observations neither estimated, dropped nor held: 0 (else a bug).
+
+        Every observation gives an estimate, exactly one drop reason, or waits in the gate
+        (``gate.held``) until a new session is confirmed or it proves an outlier.
+        """
+        stats = self.stats
+        return stats['observations'] - (stats['estimates'] + sum(self.dropped().values())
+                                        + self.gate.held)
 
     @property
     def camera_names(self) -> list[str]:

@@ -178,6 +178,7 @@ class Fuser(GatedEstimator):
     """
 
     methods = _FUSER_METHODS
+    drop_reasons = DROP_REASONS
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  method: str = 'paper', sync_tolerance_ns: int | None = None,

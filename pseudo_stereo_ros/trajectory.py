@@ -595,6 +595,7 @@ class TrajectoryFuser(GatedEstimator):
 
     method = 'trajectory'
     methods = ('trajectory',)
+    drop_reasons = DROP_REASONS
 
     def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], *,
                  sync_tolerance_ns: int | None = None, max_gap_ns: int | None = None,

@@ -67,8 +67,9 @@ def _check_counts(fuser, returned):
     reasons, info = DROP_REASONS, set()
     if fuser.method == 'trajectory':
         reasons, info = TRAJECTORY_DROP_REASONS, TRAJECTORY_INFO
-    drops = sum(stats[key] for key in reasons)
-    assert stats['observations'] == stats['estimates'] + drops + fuser.gate.held, dict(stats)
+    assert fuser.drop_reasons == reasons
+    assert fuser.unaccounted() == 0, dict(stats)
+    assert sum(fuser.dropped().values()) == sum(stats[key] for key in reasons)
     assert stats['estimates'] == returned
     assert set(stats) <= set(reasons) | {'observations', 'estimates', 'resets', 'late'} | info
 

@@ -32,7 +32,7 @@ import numpy as np
 from pseudo_stereo_ros.cli.main import main
 from pseudo_stereo_ros.errors import FuserConfigError
 from pseudo_stereo_ros.formats.csv_io import write_observations
-from pseudo_stereo_ros.fusion import DROP_REASONS, fuse, Fuser
+from pseudo_stereo_ros.fusion import fuse, Fuser
 from pseudo_stereo_ros.records import Observation, positions_array
 from pseudo_stereo_ros.rig import config_dir
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, make_scenario, observe,
@@ -78,10 +78,7 @@ def double_frame(observations, index, delay_ns, camera='camera1'):
 
 
 def counts_add_up(fuser):
-    stats = fuser.stats
-    held = fuser.gate.held if hasattr(fuser, 'gate') else 0
-    return stats['observations'] == (stats['estimates'] + held
-                                     + sum(stats[key] for key in DROP_REASONS))
+    return fuser.unaccounted() == 0
 
 
 # -- 1.1 a double trigger -------------------------------------------------------------------------

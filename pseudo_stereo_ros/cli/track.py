@@ -44,7 +44,7 @@ from ..formats.bagio import (bag_topics, BagError, check_bag_stamps, GROUND_TRUT
 from ..formats.csv_io import read_observations, read_truth, write_estimates
 from ..formats.yaml_io import read_yaml
 from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_GAP_NS, DEFAULT_MAX_SPEED_MPS,
-                      DEFAULT_SYNC_TOLERANCE_NS, DROP_REASONS, make_fuser, METHOD_NAMES)
+                      DEFAULT_SYNC_TOLERANCE_NS, make_fuser, METHOD_NAMES)
 from ..offsets import apply_time_offsets, camera_time_offsets
 from ..records import Observation
 
@@ -262,7 +262,7 @@ def run(args) -> int:
     for note in notes:
         print(note, file=sys.stderr)
     stats = fuser.stats
-    dropped = ', '.join(f'{key} {stats[key]}' for key in DROP_REASONS if stats[key])
+    dropped = ', '.join(f'{key} {count}' for key, count in fuser.dropped().items())
     if stats['outlier'] or stats['breaks']:
         dropped += (', ' if dropped else '') + (f'not fitted (outliers) {stats["outlier"]}, '
                                                 f'impacts {stats["breaks"]}')

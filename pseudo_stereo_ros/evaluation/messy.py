@@ -49,10 +49,9 @@ import numpy as np
 
 from .sweep import Case, make_rig, RIGS, simulate_case, with_strays
 from ..camera import Camera
-from ..fusion import DROP_REASONS as PAPER_DROP_REASONS, make_fuser
+from ..fusion import make_fuser
 from ..records import Observation
 from ..sim.scenarios import make_scenario, truth_at
-from ..trajectory import DROP_REASONS as TRAJECTORY_DROP_REASONS
 
 __all__ = [
     'LARGE_ERROR_M',
@@ -201,8 +200,7 @@ def run_messy(case: Case, perturbation: str, *, seed: int | None = None) -> Mess
     scenario = make_scenario(case.scenario)
     pair = {camera.name for camera in cameras[:2]}
     runs = []
-    for method, rig, reasons in (('trajectory', cameras, TRAJECTORY_DROP_REASONS),
-                                 ('paper', cameras[:2], PAPER_DROP_REASONS)):
+    for method, rig in (('trajectory', cameras), ('paper', cameras[:2])):
         fuser = make_fuser(rig, method=method)
         given = perturbed if method == 'trajectory' else \
             [o for o in perturbed if o.camera in pair]
@@ -210,9 +208,7 @@ def run_messy(case: Case, perturbation: str, *, seed: int | None = None) -> Mess
             estimates = [e for e in map(fuser.update, given) if e is not None]
         else:
             estimates = fuser.process(given)
-        stats = fuser.stats
-        balanced = stats['observations'] == stats['estimates'] + fuser.gate.held + sum(
-            stats[reason] for reason in reasons)
+        balanced = fuser.unaccounted() == 0
         points = np.array([(e.x, e.y, e.z) for e in estimates], dtype=float).reshape(-1, 3)
         finite = np.isfinite(points).all(axis=1)
         truth = truth_at(scenario, np.array([e.stamp_ns for e in estimates], dtype=np.int64))

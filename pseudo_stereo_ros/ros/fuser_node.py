@@ -64,7 +64,7 @@ from .messages import (decode_point, diagnostic_array, diagnostic_status, point_
 from .node_tools import declare, load_cameras, PublisherWatch, run_node, StartupError
 from .processes import offset_worker
 from ..errors import EncodingError, PseudoStereoError
-from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, DROP_REASONS, make_fuser,
+from ..fusion import (DEFAULT_IMAGE_MARGIN, DEFAULT_MAX_SPEED_MPS, make_fuser,
                       METHOD_NAMES, resolve_method)
 from ..offsets import camera_time_offsets, shift_observation
 from ..records import Observation
@@ -459,9 +459,8 @@ class FuserNode(Node):
             values['point received -> published max [ms]'] = max(times) * 1e3
         # Every observation gives an estimate or exactly one drop reason; 'late' and 'resets'
         # are not drops (a late point is still estimated when the method can).
-        for key in DROP_REASONS:
-            if stats[key]:
-                values[f'dropped: {key}'] = stats[key]
+        for key, count in self.fuser.dropped().items():
+            values[f'dropped: {key}'] = count
         values['resets'] = stats['resets']
         if self.fuser.method == 'trajectory':
             values['outliers (not fitted)'] = stats['outlier']
