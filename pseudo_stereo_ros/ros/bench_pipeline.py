@@ -352,13 +352,16 @@ def bench_end_to_end(seconds: float, *, connect_timeout_s: float = CONNECT_TIMEO
         position [s]
     :return: latencies [s]: ``pipeline`` (image stamp -> /ball/position received here) and
         ``transport`` (image stamp -> the same images received by a bare subscriber in
-        another process); both only for images published after the warm-up
+        another process); both only for images published after the warm-up; ``positions``
+        (every position received, the warm-up's included) and ``fuser_report`` (the fuser
+        process's last /diagnostics: input rates, estimates, drops; None before one came)
     """
     cameras, renderers = _renderers()
     points = _frame_points(200)
     names = [c.name for c in cameras]
     namespace = f'bench_e2e_{os.getpid()}'
     positions = []
+    report = []  # the fuser process's last /diagnostics (for a run that gets no position)
     since_ns = None
     with tempfile.TemporaryDirectory() as tmp:
         params = Path(tmp) / 'params.yaml'
@@ -382,6 +385,16 @@ def bench_end_to_end(seconds: float, *, connect_timeout_s: float = CONNECT_TIMEO
                 positions.append((stamp_to_ns(msg.header.stamp), time.time_ns()))
 
             node.create_subscription(PointStamped, 'ball/position', on_position, 100)
+
+            def on_diagnostics(msg):
+                for status in msg.status:
+                    if status.name.startswith('fuser: '):
+                        report[:] = [f'{status.message}; ' + ', '.join(
+                            f'{v.key} {v.value}' for v in status.values
+                            if 'input rate' in v.key or v.key.startswith(('estimates',
+                                                                          'dropped')))]
+
+            node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
             executor = make_executor(DEFAULT_EXECUTOR, context=context)
             executor.add_node(node)
             deadline = time.monotonic() + connect_timeout_s
@@ -416,7 +429,8 @@ def bench_end_to_end(seconds: float, *, connect_timeout_s: float = CONNECT_TIMEO
             transport_pairs = _stop_transport_probe(probe)
             stop_processes(processes, signal_number=signal.SIGTERM)
     return {'pipeline': _latencies(positions, since_ns),
-            'transport': _latencies(transport_pairs, since_ns)}
+            'transport': _latencies(transport_pairs, since_ns),
+            'positions': len(positions), 'fuser_report': report[0] if report else None}
 
 
 # -- camera_detector: capture and detection in one process ----------------------------------------
@@ -745,7 +759,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                    baseline=transport if transport else None, extra=extra))
         print(_row('  baseline: image stamp -> bare subscriber', transport))
         if not pipeline:
-            print('  end to end: no /ball/position received (DDS discovery failed?)')
+            print(f'  end to end: no /ball/position received while measuring (DDS discovery '
+                  f'failed?); {latencies["positions"]} before; the fuser last reported: '
+                  f'{latencies["fuser_report"] or "nothing"}')
             status = 1
         if not transport:
             print('  transport baseline: no image received by the probe process')
