@@ -130,10 +130,13 @@ once.  Windows that reach back past the impact carry the jump; frames before an
 earlier impact are dropped.  Two disagreeing detections that no jump explains
 mean the path is lost: the fit restarts from them (``restarts``), and the lost
 path's estimates no longer bound the plausible speed (a new ball served before
-the rig paused).  A camera's first detection after a silence longer than its max
-gap is fitted without gating: meanwhile the path drifted along the other
-cameras' rays, where they cannot see, and they would judge the returning
-camera's detections stray; unless another camera's detection is pending and the
+the rig paused); but until the new window has six frames, a fitted position out
+of an impact's reach of the lost path is no estimate (``implausible``: the
+ball's position is continuous at an impact, and a fit of a few frames, one of
+them a wrong blob, can be anywhere).  A camera's first detection after a
+silence longer than its max gap is fitted without gating: meanwhile the path
+drifted along the other cameras' rays, where they cannot see, and they would
+judge the returning camera's detections stray; unless another camera's detection is pending and the
 two confirm an impact, or (one other camera having carried the path) it lies off
 the path across the image of that camera's rays, where no drift moves it: then
 it is judged as any detection (a camera silent across a bounce).  A camera the
@@ -233,7 +236,8 @@ DROP_REASONS = {
     'pending': 'the detection is off the path and pending_estimate is none, or it waits in '
                'the place of one judged stray (where the ball is depends on which was)',
     'implausible': 'the estimate moved faster than max_speed_mps from the previous one, or '
-                   'lies outside the workspace box',
+                   'lies outside the workspace box, or the fit restarted from a few frames '
+                   "put it out of an impact's reach of the path it lost",
 }
 
 # Time unit of the polynomial [ns]: keeps the normal matrices well scaled.
@@ -333,7 +337,7 @@ _PAPER_SUPPORT = 6
 # Admitted detections the paper's method is given again at a restart.
 _RECENT = 6
 # Drop reasons of the fit itself (undone where the paper's estimate stands in).
-_FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending')
+_FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending', 'implausible')
 # Length of the fit whose residuals measure the noise [frames].
 _NOISE_WINDOW = 10
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
@@ -368,7 +372,8 @@ _Snapshot: TypeAlias = dict[str, object]
 _SNAPSHOT_ATTRIBUTES = ('_start', '_end', '_reference', '_weights_guessed', '_path', '_pending',
                         '_pending_innovation', '_pending_doubtful', '_replaced',
                         '_doubtful_path',
-                        '_bounce_point', '_break', '_break_range', '_segment', '_spread')
+                        '_bounce_point', '_break', '_break_range', '_segment', '_spread',
+                        '_lost')
 # One window's solution: (columns: a count or indices, beta (m,), inverse (m, m)).
 _Solution: TypeAlias = tuple[int | np.ndarray, np.ndarray, np.ndarray]
 
@@ -719,6 +724,9 @@ class TrajectoryFuser(GatedEstimator):
         # The detection it took the place of, judged stray (see _check), or None.
         self._replaced: _Frame | None = None
         self._doubtful_path: _Path | None = None  # the path fitted with it
+        # After a restart: the lost path and the stamp of its newest frame, which bound the
+        # new path's first estimates (see _restart_from); None otherwise.
+        self._lost: tuple[_Path, int] | None = None
         # A bounce's position at the frame that confirmed it, or None (_bounce_estimate).
         self._bounce_point: np.ndarray | None = None
         self._break: int | None = None  # stamp of the impact inside the window [ns], or None
@@ -1367,19 +1375,43 @@ class TrajectoryFuser(GatedEstimator):
         self._bounce_check = None
         self._segment += 1
         self._tentative = None
+        self._lost = None
 
     def _restart_from(self, *frames: _Frame) -> None:
         """
         Start the path afresh from two (or three) detections (``restarts``): the old one is lost.
 
-        The lost path's estimates no longer bound where the ball can be (a new ball served
-        before the rig paused).
+        The lost path's estimates no longer bound the plausible speed (a new ball served
+        before the rig paused), but the lost path bounds the new fit's first positions
+        (:meth:`_lost_reaches`).
         """
+        lost = None
+        if self._path is not None and self._end > self._start:
+            lost = (self._path, int(self._stamp[self._end - 1]))
         self._restart()
+        self._lost = lost
         self.plausibility.reset()
         for frame in frames:
             self._insert(frame)
         self.stats['restarts'] += 1
+
+    def _lost_reaches(self, point: Sequence[float], stamp: int) -> bool:
+        """
+        Return whether a restarted fit's position is within an impact's reach of the lost path.
+
+        Until the new window holds :data:`_GATE_SUPPORT` frames, the fit's positions must be
+        reachable from the lost path (:meth:`_reachable`): the ball's position is continuous
+        at an impact, and a fit of a few frames, one of them a wrong blob, can be anywhere
+        (a restart from three detections that disagreed with the path: 5.93 m off).  A new
+        ball elsewhere loses the fit's first estimates (the paper's stand in for them).
+        """
+        assert self._lost is not None, 'called only after a restart'
+        if self._end - self._start >= _GATE_SUPPORT:
+            self._lost = None
+            return True
+        lost, last = self._lost
+        with self._judged_by(lost):
+            return self._reachable(point, stamp, last)
 
     def _pending_estimate(self, frame: _Frame) -> Estimate | None:
         """Return the estimate at a pending detection's event: the predicted position."""
@@ -1936,6 +1968,9 @@ class TrajectoryFuser(GatedEstimator):
                 self._break_range = None
         point = self._fit(stamp, index)
         if point is None:
+            return None
+        if self._lost is not None and not self._lost_reaches(point, stamp):
+            stats['implausible'] += 1
             return None
         return Estimate(stamp, self._names[index], float(point[0]), float(point[1]),
                         float(point[2]), 'trajectory')
