@@ -136,14 +136,14 @@ ball's position is continuous at an impact, and a fit of a few frames, one of
 them a wrong blob, can be anywhere).  A camera's first detection after a
 silence longer than its max gap is fitted without gating: meanwhile the path
 drifted along the other cameras' rays, where they cannot see, and they would
-judge the returning camera's detections stray; unless another camera's detection is pending and the
-two confirm an impact, or (one other camera having carried the path) it lies off
-the path across the image of that camera's rays, where no drift moves it: then
-it is judged as any detection (a camera silent across a bounce).  A camera the
-path lost while its detections arrived is taken as fresh too: none fitted over
-its max gap, the last two taken as outliers off the path the same way and
-growing, one other camera alone carrying the path (its depth drifted along that
-camera's rays; see ``_unheard``).
+judge the returning camera's detections stray; unless another camera's
+detection is pending and the two confirm an impact, or (one other camera having
+carried the path) it lies off the path across the image of that camera's rays,
+where no drift moves it: then it is judged as any detection (a camera silent
+across a bounce).  A camera the path lost while its detections arrived is taken
+as fresh too: none fitted over its max gap, the last two taken as outliers off
+the path the same way and growing, one other camera alone carrying the path
+(its depth drifted along that camera's rays; see ``_unheard``).
 
 A late detection (older than the newest frame fitted: streamed cameras with
 different latencies) is fitted without gating too, estimated at its own stamp,
