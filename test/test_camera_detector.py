@@ -346,7 +346,8 @@ def test_three_virtual_cameras_give_the_summed_rate_and_beat_every_pair(tmp_path
         # arrive, and a loaded machine delivers them late (CI once read the count first).
         assert _spin_until(executor, lambda: time.time_ns() > flight_end + 500_000_000, 20.0)
         assert _spin_until(executor, lambda: in_flight(fused) >= in_flight(
-            p.stamp_ns for p in points), 5.0), (in_flight(fused), len(points))
+            p.stamp_ns for p in points), 5.0), (in_flight(fused), in_flight(
+                p.stamp_ns for p in points))
         published = in_flight(estimated)
         warm_ups = [d.capture_loop.stats['warm_ups'] for d in detectors]
     finally:
