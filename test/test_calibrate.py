@@ -264,6 +264,16 @@ def test_intrinsics_from_rendered_chessboards(board_images):
     assert np.percentile(np.linalg.norm(difference, axis=1), 95) < 1.0
 
 
+def test_intrinsics_from_16_bit_images_match_the_8_bit_ones(board_images):
+    # A 16-bit camera's frames are stretched to 8 bits (min to max) before the corner search.
+    eight = calibrate_intrinsics(board_images, board=BOARD, square_m=SQUARE_M)
+    sixteen = calibrate_intrinsics([image.astype(np.uint16) * 250 + 300 for image in board_images],
+                                   board=BOARD, square_m=SQUARE_M)
+    difference = sixteen.calibration.camera_matrix - eight.calibration.camera_matrix
+    assert np.all(np.abs(difference[[0, 1, 0, 1], [0, 1, 2, 2]]) <= eight.intrinsics_std), \
+        (difference, eight.intrinsics_std)
+
+
 def test_intrinsics_refuses_too_few_boards(board_images):
     with pytest.raises(CalibrationFitError, match='too few boards: .* 4 of 4 images'):
         calibrate_intrinsics(board_images[:4], board=BOARD, square_m=SQUARE_M)

@@ -76,8 +76,8 @@ def _gray(image: ImageInput, index: int, label: str | None = None) -> tuple[np.n
     elif array.ndim != 2:
         raise CalibrationFitError(f'{label}: not a grey or colour image (shape {array.shape})')
     if array.dtype != np.uint8:
-        # OpenCV's stubs require dst; None (a new array) is what OpenCV documents.
-        array = cv2.normalize(array, None, 0, 255,  # type: ignore[call-overload]
+        # A dst array, not None: OpenCV's stubs before 4.11 require one, later ones allow None.
+        array = cv2.normalize(array, np.empty_like(array), 0, 255,
                               cv2.NORM_MINMAX).astype(np.uint8)
     return array, label
 
