@@ -425,8 +425,8 @@ def test_files_with_a_future_epoch_play_at_their_stamps(video):
 
 
 def test_a_file_started_after_its_epoch_says_how_late_and_plays_from_its_start(video):
-    # Another file given the same epoch and started on time is out of step by this much: the
-    # camera_detector warns with it.
+    # Its frames are published this much after their stamps (another file given the same
+    # epoch and started on time is not): the camera_detector warns with it.
     clock = [10_000_000_000]
     source = FileSource(str(video), epoch_ns=8_500_000_000, realtime=True, loop=False,
                         system_ns=lambda: clock[0])

@@ -347,9 +347,9 @@ class CameraDetectorNode(Node):
                 self.get_logger().warning(
                     f'{self.source.description}: parameter epoch_ns was '
                     f'{self.source.late_start_s:.3f} s in the past at the first frame: playing '
-                    "at the file's pace from now, stamps from the epoch; files given the same "
-                    'epoch are out of step by their start-up difference (give one further '
-                    'ahead)')
+                    "at the file's pace from now, each frame published that long after its "
+                    'stamp (stamps stay on the epoch); a fuser whose reorder window is shorter '
+                    'takes them as a new flight (give an epoch further ahead)')
             self._stamp_source = frame.stamp_source
         if error is not None:
             self._last_image = None
