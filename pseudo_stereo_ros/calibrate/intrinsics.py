@@ -264,11 +264,12 @@ def calibrate_intrinsics(images: Sequence[ImageInput], *, board: tuple[int, int]
             f'{100 * min_coverage:.0f}%; add images with the board near the edges and corners')
 
     object_points = _board_points((cols, rows), square_m)
-    # OpenCV's stubs require a camera matrix; None (no initial guess) is what OpenCV documents.
+    # OpenCV's stubs (those of 5.1 still) require a camera matrix; None (no initial guess) is
+    # what OpenCV documents.  'unused-ignore': stubs that allow None do not fail the check.
     _, camera_matrix, dist_coeffs, rvecs, tvecs, std_intrinsics = cv2.calibrateCameraExtended(
         [object_points.astype(np.float32)] * len(corner_sets),
         [c.astype(np.float32).reshape(-1, 1, 2) for c in corner_sets], image_size,
-        None,  # type: ignore[call-overload]
+        None,  # type: ignore[call-overload, unused-ignore]
         np.zeros(5), flags=flags, criteria=LM_CRITERIA)[:6]
     dist_coeffs = np.asarray(dist_coeffs, dtype=float).ravel()[:5]
     check_intrinsics(camera_matrix, dist_coeffs, image_size)
