@@ -31,6 +31,7 @@ The ``camera_detector`` node: video files over DDS, a camera that fails and retu
 import itertools
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import time
@@ -128,6 +129,7 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
     points, positions = [], []
     fuser = None
     processes = []
+    failure = None
     try:
         # The fuser and the probe first: the detectors' wait for subscribers then only waits
         # for their own start-up and DDS matching. A reorder window longer than the two
@@ -176,14 +178,25 @@ def test_two_camera_detectors_on_video_files_feed_the_fuser_as_offline_track(tmp
             f'{len(positions)} of its {stats["estimates"]} estimates')
         executor.shutdown()
         probe.destroy_node()
+    except AssertionError as error:
+        failure = error  # reported below, after what the detectors logged
     finally:
         if fuser is not None:
             fuser.destroy_node()
         for process in processes:
             process.terminate()
         logs = [process.communicate(timeout=10)[1] for process in processes]
+    # A detector that started after its epoch publishes each frame that long after its stamp;
+    # the fuser's reorder window (0.5 s) absorbs up to 0.25 s of it with room to spare.  Checked
+    # first: it explains a failure above (in CI one once started late, and the fuser saw two
+    # flights).
     late_starts = [line for log in logs for line in log.splitlines() if 'in the past' in line]
-    assert not late_starts, f'a detector started after its epoch (a slow start-up): {late_starts}'
+    lateness = [re.search(r'was ([0-9.]+) s in the past', line) for line in late_starts]
+    assert all(late and float(late[1]) <= 0.25 for late in lateness), \
+        f'a detector started after its epoch (a slow start-up): {late_starts}'
+    if failure is not None:
+        raise AssertionError(f'{failure}\ndetector logs (last lines): ' + ' | '.join(
+            ' / '.join(log.splitlines()[-5:]) for log in logs)) from failure
     assert fuser.buffer.stats['late'] == 0
     # Stamps are the files' frame times from the epoch, whatever the playback timing.
     for index, (name, _, count) in enumerate(videos):
