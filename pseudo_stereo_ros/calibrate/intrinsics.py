@@ -76,8 +76,9 @@ def _gray(image: ImageInput, index: int, label: str | None = None) -> tuple[np.n
     elif array.ndim != 2:
         raise CalibrationFitError(f'{label}: not a grey or colour image (shape {array.shape})')
     if array.dtype != np.uint8:
-        # A dst array, not None: OpenCV's stubs before 4.11 require one, later ones allow None.
-        array = cv2.normalize(array, np.empty_like(array), 0, 255,
+        # A dst array, not None: some OpenCV stubs require one (5.1's allow None).  C order
+        # whatever the image's (OpenCV refuses a Fortran-ordered dst).
+        array = cv2.normalize(array, np.empty(array.shape, array.dtype), 0, 255,
                               cv2.NORM_MINMAX).astype(np.uint8)
     return array, label
 
