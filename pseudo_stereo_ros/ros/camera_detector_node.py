@@ -348,8 +348,9 @@ class CameraDetectorNode(Node):
                     f'{self.source.description}: parameter epoch_ns was '
                     f'{self.source.late_start_s:.3f} s in the past at the first frame: playing '
                     "at the file's pace from now, each frame published that long after its "
-                    'stamp (stamps stay on the epoch); a fuser whose reorder window is shorter '
-                    'takes them as a new flight (give an epoch further ahead)')
+                    'stamp (stamps stay on the epoch); files given one epoch that started late '
+                    "by amounts differing by more than the fuser's reorder window reach it out "
+                    'of order (late points, or a new session): give an epoch further ahead')
             self._stamp_source = frame.stamp_source
         if error is not None:
             self._last_image = None
