@@ -128,7 +128,9 @@ disagreeing and explained by a jump make an impact (the first detection after
 one is only a few pixels off); otherwise it is fitted as it would have been at
 once.  Windows that reach back past the impact carry the jump; frames before an
 earlier impact are dropped.  Two disagreeing detections that no jump explains
-mean the path is lost: the fit restarts from them (``restarts``), and the lost
+(of two cameras: one camera's alone, however many, are outliers, the newest
+pending, until another camera's detection agrees or disagrees too) mean the
+path is lost: the fit restarts from them (``restarts``), and the lost
 path's estimates no longer bound the plausible speed (a new ball served before
 the rig paused); but until the new window has six frames, a fitted position out
 of an impact's reach of the lost path is no estimate (``implausible``: the
@@ -1265,13 +1267,19 @@ class TrajectoryFuser(GatedEstimator):
         if pending is not None and stamp - pending[0] <= self.gate.rig_gap_ns:
             if self._confirm_break(frame):
                 return 'inserted'
-            if self._replaced is None:
+            replaced = self._replaced
+            if replaced is None or (pending[1] == index and replaced[1] == index):
                 # No impact explains the two (or only a jump no bounce or hit gives): one of
                 # them is stray (a wrong blob next to an impact, or two in a row), or the path
                 # is lost (a new ball).  The pending one is taken as stray and this one waits
                 # in its place: the next detection agrees with the path (this one stray too),
                 # or confirms an impact with it or with the replaced one, or else the path
-                # restarts from all three.
+                # restarts from all three.  Three or more of one camera alone do not restart
+                # it: along the other cameras' rays only that camera sees the ball, so its
+                # wrong blobs in a row (a reflection, a second ball) look like a path that
+                # turned; they wait for another camera's detection to agree with the path
+                # (all stray) or to disagree too (with a rig dropping frames, a burst of five
+                # wrong blobs of one camera restarted the fit from them: 2.3 m off).
                 self.stats['outlier'] += 1
                 self._judged_stray(pending[1], pending[0], self._pending_innovation)
                 self._pending = frame
@@ -1279,11 +1287,10 @@ class TrajectoryFuser(GatedEstimator):
                 self._pending_doubtful = False
                 self._replaced = pending
                 return 'replaced'
-            # Two detections in a row off the path and not explained by an impact: the path
-            # is lost (or was wrong). Start it afresh from them, as at a new flight; the
-            # estimates of the lost path no longer bound where the ball can be (a new ball
-            # served before the rig paused).
-            replaced = self._replaced
+            # Detections in a row off the path, of two cameras, not explained by an impact:
+            # the path is lost (or was wrong). Start it afresh from them, as at a new flight;
+            # the estimates of the lost path no longer bound where the ball can be (a new
+            # ball served before the rig paused).
             if replaced is not None and frame[0] - replaced[0] <= self.gate.rig_gap_ns:
                 # The pending one was the stray one, and the one it replaced the first after
                 # an impact: the two left confirm it (the outlier counted stays one).
