@@ -99,7 +99,7 @@ frames serves.
 from the previous event: its innovation less that camera's last residual (slow
 biases cancel again), over its expected spread (noise, prediction covariance,
 and the running spread of innovations accepted without the prediction's own
-variance).  Until the noise is known
+variance, each counted at most 20 times the spread so far).  Until the noise is known
 (ten samples: a wrongly low noise makes false impacts) the gate uses a
 provisional noise, twice the estimate and at least 1 px, from three samples on
 (a flight's first 0.4 s at 30 fps: a stray detection there, fitted, bent the
@@ -318,6 +318,8 @@ _BOUNCE_MIN_SPEED = 0.1
 # Smoothing of the running innovation spread and of Rice's noise estimate; the clip of one
 # noise sample (in variances) once warmed up.
 _SPREAD_ALPHA = 0.05
+# The largest innovation sample the running spread learns from, in times the spread so far.
+_SPREAD_CLIP = 20.0
 _SIGMA_ALPHA = 0.02
 _EULER_GAMMA = 0.5772156649015329
 # Residuals of frames with a larger leverage (short fits) do not enter the noise estimate.
@@ -1232,10 +1234,14 @@ class TrajectoryFuser(GatedEstimator):
                                                                equations)
         # The running spread learns only from detections within the gate without the path's
         # own uncertainty: a bounce the path missed let a 28 px innovation in that way, the
-        # spread grew to 46 px^2, and 200 ms later a wrong blob passed (0.53 m off).
+        # spread grew to 46 px^2, and 200 ms later a wrong blob passed (0.53 m off).  And a
+        # sample counts at most _SPREAD_CLIP times the spread so far: a wrong blob within the
+        # gate (9 px, while the noise was provisional) raised it 27-fold at once, and later
+        # blobs of 11 and 25 px passed (three cameras: 0.93 m off); a bias that grows (a
+        # curve the fit misses) still nearly doubles it at every sample.
         if statistic <= self.innovation_gate and not refining and not uncertain:
             self._spread = squared if self._spread is None else self._spread + \
-                _SPREAD_ALPHA * (squared - self._spread)
+                _SPREAD_ALPHA * (min(squared, _SPREAD_CLIP * self._spread) - self._spread)
         pending = self._pending
         # Two off the path in a row: this one agreeing only thanks to the path's own
         # uncertainty does not make both stray (the path may be the one off).
