@@ -128,9 +128,11 @@ disagreeing and explained by a jump make an impact (the first detection after
 one is only a few pixels off); otherwise it is fitted as it would have been at
 once.  Windows that reach back past the impact carry the jump; frames before an
 earlier impact are dropped.  Two disagreeing detections that no jump explains
-(of two cameras: one camera's alone, however many, are outliers, the newest
-pending, until another camera's detection agrees or disagrees too) mean the
-path is lost: the fit restarts from them (``restarts``), and the lost
+(of two cameras: three or more in a row of one camera alone are outliers, the
+newest pending, until another camera's detection agrees or disagrees too; an
+impact undone because one of the detections confirming it was stray, where the
+two left are not explained either, still restarts from them, of one camera or
+two) mean the path is lost: the fit restarts from them (``restarts``), and the lost
 path's estimates no longer bound the plausible speed (a new ball served before
 the rig paused); but until the new window has six frames, a fitted position out
 of an impact's reach of the lost path is no estimate (``implausible``: the
@@ -954,11 +956,12 @@ class TrajectoryFuser(GatedEstimator):
                            prediction: tuple[float, float, float],
                            equations: tuple[tuple[float, ...], ...]) -> np.ndarray | None:
         """
-        Return the image direction (2,) [px per m] of a carrier camera's ray through a point.
+        Return the image direction (2,) of a carrier camera's ray through a point.
 
         In camera ``index``'s image (the Jacobian of the detection's innovation at the
-        point, its rows from ``equations``): where the path drifts while the carrier alone
-        sees the ball (along the epipolar line).  None behind the camera.
+        point, its rows from ``equations``, times the point's offset from the carrier's
+        centre; only its direction means anything): where the path drifts while the
+        carrier alone sees the ball (along the epipolar line).  None behind the camera.
         """
         point = np.array(prediction)
         innovation = self._innovation(index, np.array(equations[:2]), np.array(equations[2]),
@@ -967,20 +970,21 @@ class TrajectoryFuser(GatedEstimator):
             return None
         return innovation[1] @ (point - self._center[carrier])
 
-    def _along_carrier(self, index: int, stamp: int, equations: tuple[tuple[float, ...], ...],
+    def _along_carrier(self, index: int, prediction: tuple[float, float, float],
+                       equations: tuple[tuple[float, ...], ...],
                        found: tuple[float, float]) -> bool:
         """
         Return whether an innovation [px] lies where a drift of the path can explain it.
 
         True unless one other camera alone carried the path since this camera's newest
         frame in the window and the innovation is off the image of its ray through the
-        prediction by more than 45 degrees (``_ALONG_COSINE``).
+        prediction by more than 45 degrees (``_ALONG_COSINE``).  (With two or more, the
+        rule it serves in :meth:`_check` stays as it was.)
         """
         carriers = self._carried_since(index)[1]
-        if len(carriers) != 1 or self._path is None:
+        if len(carriers) != 1:
             return True
-        along = self._carrier_direction(index, int(carriers[0]), self._predict_point(stamp),
-                                        equations)
+        along = self._carrier_direction(index, int(carriers[0]), prediction, equations)
         if along is None:
             return True
         size = math.hypot(*found) * math.hypot(float(along[0]), float(along[1]))
@@ -1278,7 +1282,8 @@ class TrajectoryFuser(GatedEstimator):
         # blobs of 11 and 25 px passed (three cameras: 0.93 m off); a bias that grows (a
         # curve the fit misses) still nearly doubles it at every sample.
         if statistic <= self.innovation_gate and not refining and not uncertain:
-            self._spread = squared if self._spread is None else self._spread + \
+            # (A spread of zero, from a first sample of zero, would stay zero: restarted.)
+            self._spread = squared if not self._spread else self._spread + \
                 _SPREAD_ALPHA * (min(squared, _SPREAD_CLIP * self._spread) - self._spread)
         pending = self._pending
         # Two off the path in a row: this one agreeing only thanks to the path's own
@@ -1302,7 +1307,8 @@ class TrajectoryFuser(GatedEstimator):
         if found is not None and rejected is not None and \
                 rejected[0] == self._previous.get(index) and rejected[1] is not None and \
                 math.hypot(found[0] - rejected[1][0], found[1] - rejected[1][1]) < \
-                0.5 * math.hypot(*found) and self._along_carrier(index, stamp, equations, found):
+                0.5 * math.hypot(*found) and \
+                self._along_carrier(index, prediction, equations, found):
             # This camera's previous detection was rejected, off the path the same way: not
             # stray detections (they scatter) but a path the other cameras' rays have pulled
             # off this camera's (one camera alone does not fix the depth). Fitted, it
@@ -1324,8 +1330,8 @@ class TrajectoryFuser(GatedEstimator):
                 # it: along the other cameras' rays only that camera sees the ball, so its
                 # wrong blobs in a row (a reflection, a second ball) look like a path that
                 # turned; they wait for another camera's detection to agree with the path
-                # (all stray) or to disagree too (with a rig dropping frames, a burst of five
-                # wrong blobs of one camera restarted the fit from them: 2.3 m off).
+                # (all stray) or to disagree too (with a rig dropping frames, three wrong blobs
+                # in a row of one camera's burst restarted the fit from them: 2.3 m off).
                 self.stats['outlier'] += 1
                 self._judged_stray(pending[1], pending[0], self._pending_innovation)
                 self._pending = frame

@@ -190,7 +190,8 @@ def test_one_wrong_blob_within_the_gate_does_not_widen_it():
 def test_a_burst_off_the_other_cameras_rays_is_not_taken_for_a_drift():
     # Bursts of camera 1's wrong blobs (default rig, 60 fps, offset 0.08, bouncing ball): two
     # in a row off the path the same way by chance were taken for a path that camera 2's rays
-    # had pulled off camera 1's, and fitted (1.32 m off, MAE 41.9 mm).  With one other camera
+    # had pulled off camera 1's, and fitted (1.32 m off, MAE 41.9 mm: one of the runs the
+    # spread's clip made worse, 0.48 m before it, on another course).  With one other camera
     # carrying the path, a drift moves the prediction only along the image of that camera's
     # rays; off it by more than 45 degrees, the detection is judged as any other: 0.13 m at
     # most, MAE 1.4 mm.  Bounds: issue 11's 0.5 m and paper's largest error (0.55 m).
