@@ -93,7 +93,14 @@ start, or a restart after the path was lost) the paper's method
 gives the estimate: a fit of so few frames extrapolates more roughly than the
 paper's anchors (the real sessions' flight starts), and no detection is gated
 by it.  Where the paper has none yet either, a constant-velocity fit of all
-frames serves.
+frames serves.  Where the window is long enough for acceleration but no window
+determines it (one camera carried the path for a while: its depth is known only
+from the other cameras' older rays), the better of a constant velocity and a
+free fall over all frames (the smaller residuals) serves, and only where its
+residuals are noise (``_fixed_fallback``): over 0.9 s of a bounce a constant
+velocity missed gravity by 0.98 m.  A young window (a restart's first frames)
+is not gated; one frame whose removal explains the misfit is dropped there as an
+outlier.
 
 **Impacts and outliers.**  A new detection is compared with the path predicted
 from the previous event: its innovation less that camera's last residual (slow
@@ -197,6 +204,7 @@ import math
 from typing import TypeAlias
 
 import numpy as np
+from scipy.special import chdtri, fdtri
 
 from .camera import Camera
 from .errors import FuserConfigError
@@ -236,7 +244,8 @@ DROP_REASONS = {
     **INPUT_DROP_REASONS,
     'no_partner': 'fewer than two cameras have a detection within their max gap',
     'warming_up': 'too few frames in the flight for a fit yet',
-    'degenerate': 'no fit (or prediction) determined well enough (max_uncertainty)',
+    'degenerate': 'no fit (or prediction) determined well enough (max_uncertainty), or '
+                  'only a velocity or free-fall fit whose residuals are beyond the noise',
     'pending': 'the detection is off the path and pending_estimate is none, or it waits in '
                'the place of one judged stray (where the ball is depends on which was)',
     'implausible': 'the estimate moved faster than max_speed_mps from the previous one, or '
@@ -353,6 +362,15 @@ _FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending', 'implausible'
 _NOISE_WINDOW = 10
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
 _CV_MIN = 3
+# Where no window determines an acceleration, a velocity or free-fall fit of all frames is
+# used only if its residual sum of squares is within the chi-square bound of this p-value at
+# _FALLBACK_NOISE_FACTOR times the measured noise (see _fixed_fallback); one frame is taken
+# as an outlier there where removing it explains the misfit (an F test at this p-value).
+# (Factors 1.4, 2, 2.8, 4 and 8 over sweep --messy: 170 / 170 / 169 / 168 / 169 runs over
+# 0.5 m, 175 before; but at 8, or without the bound, a camera's silence at a spiral's start
+# let a fallback's estimate 0.47 m off through.  2: the noise a provisional gate allows.)
+_FALLBACK_P = 0.001
+_FALLBACK_NOISE_FACTOR = 2.0
 # An impact estimate needs the detection off the prediction within this sine of vertical.
 _VERTICAL_SINE = 0.5
 _IMPACT_REACH = 5.0
@@ -1081,6 +1099,15 @@ class TrajectoryFuser(GatedEstimator):
         if rebuild is None:
             rebuild = position
         self._rebuild(max(rebuild, self._start))
+
+    def _remove(self, position: int) -> None:
+        """Remove the frame at ``position`` of the store (an outlier found afterwards)."""
+        end = self._end
+        for array in self._arrays():
+            array[position:end - 1] = array[position + 1:end].copy()
+        self._end = end - 1
+        if position < self._end:
+            self._rebuild(max(position, self._start))
 
     def _rebuild(self, first: int) -> None:
         """Recompute the prefix sums from frame ``first`` on (``first == _start``: from 0)."""
@@ -2070,6 +2097,7 @@ class TrajectoryFuser(GatedEstimator):
         matrices, moments = systems[:, :unknowns, :unknowns], systems[:, :unknowns, unknowns]
         position = _POSITION if t_break is None else _position_row(0, stamp - t_break)
         kept: _Fits | None = None
+        fixed, biased = 0, False  # a velocity or free-fall fallback (see _fixed_fallback)
         if quadratic:
             if t_break is None:
                 kept = self._fits(matrices, moments, sizes, 9, position, index)
@@ -2090,6 +2118,13 @@ class TrajectoryFuser(GatedEstimator):
                 system = self._window_system(stamp, end - after, end)
             kept = self._fits(system[0][:, _CV][:, :, _CV], system[1][:, _CV],
                               np.array((after,)), _CV, position, index)
+            if quadratic and kept is not None:
+                # Frames enough for acceleration, but no window determined it.
+                fallback = self._fixed_fallback(kept, system, stamp, end - after, position,
+                                                index)
+                if fallback is None:  # a frame was taken as an outlier: fit without it
+                    return self._fit(stamp, index)
+                kept, fixed, biased = fallback
         if kept is None:
             self.stats['warming_up' if count < self._windows[0] else 'degenerate'] += 1
             return None
@@ -2118,6 +2153,9 @@ class TrajectoryFuser(GatedEstimator):
                     estimate = self._with_jerk(points, covariances, chosen, *jerk, sigma2)
         else:  # the noise estimate below uses the lower-order fits too
             beta, inverse, point, covariance, points, covariances = lower
+        if fixed:  # the free fall's acceleration is known, not fitted
+            beta = beta.copy()
+            beta[_ACCELERATION] = _FIXED_ACCELERATIONS[:, fixed]
         coefficients = beta.tolist()
         self._path = (stamp, beta, inverse, t_break,
                       coefficients + [0.0] * (12 - len(coefficients)))
@@ -2140,6 +2178,9 @@ class TrajectoryFuser(GatedEstimator):
             if reference < len(kept_sizes):
                 self._measure_noise(stamp, index, _standardized(
                     rows, rhs, weight, points[reference], covariances[reference]))
+        if biased:  # the path predicts as before (the gate judges by it), but no estimate
+            self.stats['degenerate'] += 1
+            return None
         return point if estimate is None else estimate
 
     def _jerk_fits(self, stamp: int, index: int, count: int,
@@ -2291,6 +2332,83 @@ class TrajectoryFuser(GatedEstimator):
         lower_betas = betas - np.matmul(gains, solved[:, :, :1])[:, :, 0]
         lower_betas[:, _ACCELERATION] = _FIXED_ACCELERATIONS[:, model]
         return lower_betas, inverses - np.matmul(gains, solved[:, :, 1:])
+
+    def _fixed_fallback(self, velocity: _Fits, system: tuple[np.ndarray, np.ndarray],
+                        stamp: int, first: int, position: np.ndarray,
+                        index: int) -> tuple[_Fits, int, bool] | None:
+        """
+        Choose a velocity or free-fall fit of frames [first, _end) where no acceleration fit is.
+
+        There the window is long enough for acceleration, but no window determined it: one
+        camera carried the path for a while, and its depth rests on the other cameras'
+        older rays (a burst of one camera's wrong blobs, all rejected; a camera silent).
+        The velocity fit over the whole window missed gravity there (0.98 m off 0.9 s after
+        a bounce); the free fall does not.  The one with the smaller residuals serves.
+        Its residuals beyond the noise (chi-square at ``_FALLBACK_P``, the noise
+        ``_FALLBACK_NOISE_FACTOR`` times the measured one) show it biased: no estimate,
+        though the path still predicts from it (the gate judges by it, as before).  But
+        first, where one frame's removal explains the misfit (F test), that frame is taken
+        as an outlier and dropped: a restart's first frames are not gated, and a wrong blob
+        among them kept every such fit biased (a spiral's restart lost most estimates).
+
+        :param velocity: the velocity fit (:meth:`_fits`) of the frames
+        :param system: their normal system at ``stamp`` (1, m, m), (1, m), m >= 9
+        :return: ``(fit, model, biased)``, the model a column of ``_FIXED_ACCELERATIONS``;
+            or None when a frame was dropped (fit again)
+        """
+        end = self._end
+        squares = self._fixed_squares(stamp, first, end)
+        model = int(np.argmin(squares))
+        fit: _Fits | None = velocity
+        if model:
+            matrix = system[0][:, _CV][:, :, _CV]
+            offset = system[0][:, _CV][:, :, _ACCELERATION] @ _FIXED_ACCELERATIONS[:, model]
+            fit = self._fits(matrix, system[1][:, _CV] - offset, np.array((end - first,)),
+                             _CV, position, index)
+            if fit is None:
+                fit, model = velocity, 0
+        freedom = 2 * (end - first) - len(_CV)
+        sigma = self.sigma_px if self.sigma_px is not None else _PROVISIONAL_SIGMA_PX
+        noise2 = (_FALLBACK_NOISE_FACTOR * sigma) ** 2
+        biased = freedom > 0 and squares[model] > chdtri(freedom, _FALLBACK_P) * noise2
+        if biased and freedom > 2:
+            without = [min(self._fixed_squares(stamp, first, end, skip))
+                       for skip in range(end - first)]
+            skip = int(np.argmin(without))
+            if (squares[model] - without[skip]) / 2.0 > \
+                    fdtri(2, freedom - 2, 1.0 - _FALLBACK_P) * without[skip] / (freedom - 2):
+                position_ = first + skip
+                self._judged_stray(int(self._camera[position_]), int(self._stamp[position_]),
+                                   None)
+                self._remove(position_)
+                self.stats['outlier'] += 1
+                return None
+        assert fit is not None, 'the velocity fit was kept'
+        return fit, model, biased
+
+    def _fixed_squares(self, stamp: int, first: int, end: int,
+                       skip: int | None = None) -> list[float]:
+        """
+        Return the residual sums of squares [px^2] of frames [first, end) per fixed acceleration.
+
+        Least squares of the position and velocity with each of ``_FIXED_ACCELERATIONS``'
+        accelerations (the frames' weights make the residuals pixels); ``skip``: a frame
+        (its offset from ``first``) left out.
+        """
+        maps = _position_map(self._stamp[first:end] - stamp, None)[:, :, :9]
+        weight = self._weight[first:end, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight[:, :, None]
+        rhs = self._rhs[first:end] * weight
+        if skip is not None:
+            design, rhs = np.delete(design, skip, axis=0), np.delete(rhs, skip, axis=0)
+        design, rhs = design.reshape(-1, 9), rhs.reshape(-1)
+        squares = []
+        for model in range(_FIXED_ACCELERATIONS.shape[1]):
+            target = rhs - design[:, _ACCELERATION] @ _FIXED_ACCELERATIONS[:, model]
+            solution = np.linalg.lstsq(design[:, _CV], target, rcond=None)[0]
+            residual = target - design[:, _CV] @ solution
+            squares.append(float(residual @ residual))
+        return squares
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
