@@ -98,9 +98,10 @@ determines it (one camera carried the path for a while: its depth is known only
 from the other cameras' older rays), the better of a constant velocity and a
 free fall over all frames (the smaller residuals) serves, and only where its
 residuals are noise (``_fixed_fallback``): over 0.9 s of a bounce a constant
-velocity missed gravity by 0.98 m.  A young window (a restart's first frames)
-is not gated; one frame whose removal explains the misfit is dropped there as an
-outlier.
+velocity missed gravity by 0.98 m.  One frame whose removal alone explains such
+a fit's misfit is dropped as an outlier there, and in a window that just
+reached six frames (``_check_young_window``): a flight's or a restart's first
+frames are fitted ungated, and a restart often starts from a wrong blob.
 
 **Impacts and outliers.**  A new detection is compared with the path predicted
 from the previous event: its innovation less that camera's last residual (slow
@@ -190,7 +191,8 @@ Counts: ``observations`` = ``estimates`` + drops (:data:`DROP_REASONS`, the
 paper fuser's plus ``pending``) + ``gate.held`` at all times.  The other keys
 are informational: ``late``, ``breaks``, ``restarts``, ``predicted`` (estimates
 at pending detections, among ``estimates``) and ``outlier`` (detections judged
-stray, not fitted; their event already counted as an estimate or a drop).
+stray, not fitted, or fitted and dropped again afterwards (``_remove_misfit``); their
+event already counted as an estimate or a drop).
 """
 
 from __future__ import annotations
@@ -362,15 +364,15 @@ _FIT_DROPS = ('no_partner', 'warming_up', 'degenerate', 'pending', 'implausible'
 _NOISE_WINDOW = 10
 # Fewest frames of a velocity fit at a flight's start (3 determine it exactly).
 _CV_MIN = 3
-# Where no window determines an acceleration, a velocity or free-fall fit of all frames is
-# used only if its residual sum of squares is within the chi-square bound of this p-value at
-# _FALLBACK_NOISE_FACTOR times the measured noise (see _fixed_fallback); one frame is taken
-# as an outlier there where removing it explains the misfit (an F test at this p-value).
+# A velocity or free-fall fit of a window's frames misfits where its residual sum of squares
+# is beyond the chi-square bound of this p-value at _MISFIT_NOISE_FACTOR times the measured
+# noise (see _fixed_fallback, _check_young_window); one frame is taken as an outlier where
+# removing it explains the misfit (an F test at this p-value over the frames, Bonferroni).
 # (Factors 1.4, 2, 2.8, 4 and 8 over sweep --messy: 170 / 170 / 169 / 168 / 169 runs over
 # 0.5 m, 175 before; but at 8, or without the bound, a camera's silence at a spiral's start
 # let a fallback's estimate 0.47 m off through.  2: the noise a provisional gate allows.)
-_FALLBACK_P = 0.001
-_FALLBACK_NOISE_FACTOR = 2.0
+_MISFIT_P = 0.001
+_MISFIT_NOISE_FACTOR = 2.0
 # An impact estimate needs the detection off the prediction within this sine of vertical.
 _VERTICAL_SINE = 0.5
 _IMPACT_REACH = 5.0
@@ -740,6 +742,7 @@ class TrajectoryFuser(GatedEstimator):
         # The newest admitted detections, given to the paper's method again at a restart.
         self._recent: deque[Admitted] = deque(maxlen=_RECENT)
         self._start = self._end = 0
+        self._removed = False  # a fitted frame was removed at this event (_remove_misfit)
         self._reference: int | None = None  # stamp of the prefix sums' coefficients [ns]
         self._weights_guessed = True  # weights of a new flight's frames, before its first fit
         self._last: dict[str, int] = {}  # camera name -> its newest stamp
@@ -806,9 +809,12 @@ class TrajectoryFuser(GatedEstimator):
         paper = None if supported else self._paper._fuse(item)
         stats = self.stats
         dropped = [stats[reason] for reason in _FIT_DROPS]
+        self._removed = False
         estimate = self._fit_frame(index, stamp, item.x, item.y, item.late, item.fresh)
         if self._end - self._start < _PAPER_SUPPORT:
-            if supported:  # the path was lost at this frame: the fit restarts from its frames
+            if supported and not self._removed:
+                # The path was lost at this frame: the fit restarts from its frames.  (A
+                # frame removed as an outlier shrinks the window too: not a lost path.)
                 self._paper._forget()
                 first = int(self._stamp[self._start])
                 for earlier in recent:
@@ -930,7 +936,24 @@ class TrajectoryFuser(GatedEstimator):
             if verdict == 'doubtful':
                 return self._doubtful_estimate(frame)
         self._insert(frame)
+        if self._end - self._start == _GATE_SUPPORT:
+            self._check_young_window(stamp)
         return self._estimate(stamp, index)
+
+    def _check_young_window(self, stamp: int) -> None:
+        """
+        Drop a wrong blob from a window that just reached the frames detections are gated by.
+
+        A flight's or a restart's first frames are fitted without gating, and a restart
+        starts from detections off the path, often one a wrong blob: fitted, it bent the
+        restarted path (under bursts of wrong blobs 4 of 240 runs over 0.5 m more).  Where a
+        velocity or free fall misfits the window and one frame's removal alone explains it
+        (:meth:`_remove_misfit`), that frame is an outlier.  Not across an impact.
+        """
+        if self._break is None:
+            first = self._start
+            squares, without = self._fixed_squares(stamp, first, self._end)
+            self._remove_misfit(first, min(squares), without)
 
     def _seen_off_path(self, index: int, stamp: int,
                        equations: tuple[tuple[float, ...], ...]) -> bool:
@@ -2344,12 +2367,11 @@ class TrajectoryFuser(GatedEstimator):
         older rays (a burst of one camera's wrong blobs, all rejected; a camera silent).
         The velocity fit over the whole window missed gravity there (0.98 m off 0.9 s after
         a bounce); the free fall does not.  The one with the smaller residuals serves.
-        Its residuals beyond the noise (chi-square at ``_FALLBACK_P``, the noise
-        ``_FALLBACK_NOISE_FACTOR`` times the measured one) show it biased: no estimate,
+        Its residuals beyond the noise (:meth:`_misfits`) show it biased: no estimate,
         though the path still predicts from it (the gate judges by it, as before).  But
-        first, where one frame's removal explains the misfit (F test), that frame is taken
-        as an outlier and dropped: a restart's first frames are not gated, and a wrong blob
-        among them kept every such fit biased (a spiral's restart lost most estimates).
+        first, where one frame's removal alone explains the misfit, that frame is an outlier
+        and is dropped (:meth:`_remove_misfit`): a restart's first frames are not gated, and
+        a wrong blob among them kept every such fit biased.
 
         :param velocity: the velocity fit (:meth:`_fits`) of the frames
         :param system: their normal system at ``stamp`` (1, m, m), (1, m), m >= 9
@@ -2357,7 +2379,7 @@ class TrajectoryFuser(GatedEstimator):
             or None when a frame was dropped (fit again)
         """
         end = self._end
-        squares = self._fixed_squares(stamp, first, end)
+        squares, without = self._fixed_squares(stamp, first, end)
         model = int(np.argmin(squares))
         fit: _Fits | None = velocity
         if model:
@@ -2367,48 +2389,96 @@ class TrajectoryFuser(GatedEstimator):
                              _CV, position, index)
             if fit is None:
                 fit, model = velocity, 0
-        freedom = 2 * (end - first) - len(_CV)
-        sigma = self.sigma_px if self.sigma_px is not None else _PROVISIONAL_SIGMA_PX
-        noise2 = (_FALLBACK_NOISE_FACTOR * sigma) ** 2
-        biased = freedom > 0 and squares[model] > chdtri(freedom, _FALLBACK_P) * noise2
-        if biased and freedom > 2:
-            without = [min(self._fixed_squares(stamp, first, end, skip))
-                       for skip in range(end - first)]
-            skip = int(np.argmin(without))
-            if (squares[model] - without[skip]) / 2.0 > \
-                    fdtri(2, freedom - 2, 1.0 - _FALLBACK_P) * without[skip] / (freedom - 2):
-                position_ = first + skip
-                self._judged_stray(int(self._camera[position_]), int(self._stamp[position_]),
-                                   None)
-                self._remove(position_)
-                self.stats['outlier'] += 1
-                return None
+        if self._remove_misfit(first, float(squares[model]), without):
+            return None
         assert fit is not None, 'the velocity fit was kept'
-        return fit, model, biased
+        return fit, model, self._misfits(float(squares[model]), end - first)
 
-    def _fixed_squares(self, stamp: int, first: int, end: int,
-                       skip: int | None = None) -> list[float]:
+    def _misfits(self, squares: float, frames: int) -> bool:
+        """
+        Return whether a velocity or free-fall fit's residuals [px^2] are beyond the noise.
+
+        The chi-square bound (``_MISFIT_P``) of its degrees of freedom at
+        ``_MISFIT_NOISE_FACTOR`` times the measured noise (1 px before it is measured).
+        """
+        freedom = 2 * frames - len(_CV)
+        sigma = self.sigma_px if self.sigma_px is not None and \
+            self._sigma_count >= _SIGMA_PROVISIONAL else _PROVISIONAL_SIGMA_PX
+        return freedom > 0 and squares > chdtri(freedom, _MISFIT_P) * \
+            (_MISFIT_NOISE_FACTOR * sigma) ** 2
+
+    def _remove_misfit(self, first: int, squares: float, without: np.ndarray) -> bool:
+        """
+        Remove the one frame whose removal alone explains a misfit; return whether one was.
+
+        Where the fit of frames [first, _end) misfits (:meth:`_misfits`), the frame whose
+        removal lowers the residuals most is an outlier if the F test (2 and the remaining
+        degrees of freedom, ``_MISFIT_P`` over the frames) finds that drop beyond the
+        remaining residuals' spread; it is removed (``outlier``).  Not while an impact is
+        being decided (the frames after it are held elsewhere).
+
+        :param squares: the fit's residual sum of squares [px^2]
+        :param without: (N,) the same without each frame (:meth:`_fixed_squares`)
+        """
+        frames = self._end - first
+        freedom = 2 * frames - len(_CV) - 2
+        if freedom <= 0 or self._tentative is not None or self._bounce_check is not None or \
+                not self._misfits(squares, frames):
+            return False
+        skip = int(np.argmin(without))
+        rest = float(without[skip])
+        if not (squares - rest) / 2.0 > fdtri(2, freedom, 1.0 - _MISFIT_P / frames) * \
+                rest / freedom:
+            return False
+        # (Not recorded as its camera's rejected detection: it was fitted, and may be older
+        # than that camera's newest frame.)
+        self._remove(first + skip)
+        self._removed = True
+        self.stats['outlier'] += 1
+        return True
+
+    def _fixed_squares(self, stamp: int, first: int,
+                       end: int) -> tuple[np.ndarray, np.ndarray]:
         """
         Return the residual sums of squares [px^2] of frames [first, end) per fixed acceleration.
 
         Least squares of the position and velocity with each of ``_FIXED_ACCELERATIONS``'
-        accelerations (the frames' weights make the residuals pixels); ``skip``: a frame
-        (its offset from ``first``) left out.
+        accelerations (the frames' weights make the residuals pixels).
+
+        :return: ``(squares (M,), without (N,))``: the sums per model, and the smallest sum
+            over the models with each frame left out (inf where the rest do not determine
+            the fit), by the leave-one-out identity ``S - e^T (I - H)^-1 e`` of the frame's
+            residuals ``e`` and its block ``H`` of the hat matrix
         """
         maps = _position_map(self._stamp[first:end] - stamp, None)[:, :, :9]
         weight = self._weight[first:end, None]
         design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight[:, :, None]
-        rhs = self._rhs[first:end] * weight
-        if skip is not None:
-            design, rhs = np.delete(design, skip, axis=0), np.delete(rhs, skip, axis=0)
-        design, rhs = design.reshape(-1, 9), rhs.reshape(-1)
+        rhs = self._rhs[first:end] * weight  # (N, 2)
+        velocity = design[:, :, _CV]  # (N, 2, 6)
+        rows = velocity.reshape(-1, len(_CV))
+        try:
+            inverse = np.linalg.inv(rows.T @ rows)
+        except np.linalg.LinAlgError:
+            return np.full(_FIXED_ACCELERATIONS.shape[1], np.inf), np.full(end - first, np.inf)
+        # Each frame's 2 x 2 block of the hat matrix, and I - H's inverse (by its adjugate).
+        hat = np.einsum('nri,ij,nsj->nrs', velocity, inverse, velocity)
+        a, b = 1.0 - hat[:, 0, 0], -hat[:, 0, 1]
+        c, d = -hat[:, 1, 0], 1.0 - hat[:, 1, 1]
+        determinant = a * d - b * c
         squares = []
+        without = np.full(end - first, np.inf)
         for model in range(_FIXED_ACCELERATIONS.shape[1]):
-            target = rhs - design[:, _ACCELERATION] @ _FIXED_ACCELERATIONS[:, model]
-            solution = np.linalg.lstsq(design[:, _CV], target, rcond=None)[0]
-            residual = target - design[:, _CV] @ solution
-            squares.append(float(residual @ residual))
-        return squares
+            target = rhs - design[:, :, _ACCELERATION] @ _FIXED_ACCELERATIONS[:, model]
+            solution = inverse @ (rows.T @ target.reshape(-1))
+            residual = target - velocity @ solution  # (N, 2)
+            total = float(np.sum(residual * residual))
+            squares.append(total)
+            x, y = residual[:, 0], residual[:, 1]
+            with np.errstate(divide='ignore', invalid='ignore'):
+                drop = (x * (d * x - b * y) + y * (a * y - c * x)) / determinant
+            left = np.where(determinant > 1e-9, total - drop, np.inf)
+            without = np.minimum(without, left)
+        return np.array(squares), without
 
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
