@@ -47,7 +47,8 @@ from pseudo_stereo_ros.records import Observation, positions_array
 from pseudo_stereo_ros.sim.scenarios import (DEFAULT_EPOCH_NS, default_rig, look_at_calibration,
                                              make_scenario, observe, Scenario,
                                              shutter_stamps, truth_at)
-from pseudo_stereo_ros.trajectory import (_inverses, _JUMP_MARGIN_MPS, _map_terms,
+from pseudo_stereo_ros.trajectory import (_ACCELERATION, _CV, _FIXED_ACCELERATIONS,
+                                          _inverses, _JUMP_MARGIN_MPS, _map_terms,
                                           _position_map, _position_row, TrajectoryFuser)
 import pytest
 
@@ -876,3 +877,40 @@ def test_late_detections_around_an_impact(fps):
         np.searchsorted(data.truth_stamps, [e.stamp_ns for e in estimates])], axis=1)
     assert np.isfinite(errors).all() and errors.max() < 0.5
     assert len(estimates) >= 0.9 * len(observations)
+
+
+def test_leave_one_out_sums_equal_refitting_without_each_frame():
+    # The misfit test's closed form (S - e^T (I - H)^-1 e per frame's two rows) against
+    # least squares refitted without each frame, per fixed acceleration, on a noisy bounce's
+    # window with a wrong blob in it.  Bound: numerical agreement (1e-9 relative).
+    case = Case('default', 60.0, 0.3, 0.3, True, 'bounce', seed=7)
+    cameras = make_rig(case.rig)
+    observations, _, _ = simulate_case(case, cameras)
+    fuser = make_fuser(cameras, method='trajectory')
+    for observation in observations[:40]:
+        fuser.update(observation)
+    first, end = fuser._start, fuser._end
+    assert end - first >= 20
+    fuser._rows[first + 5, 0] += 0.01  # a wrong blob's row (about 10 px)
+    stamp = int(fuser._stamp[end - 1])
+    squares, without = fuser._fixed_squares(stamp, first, end)
+    maps = _position_map(fuser._stamp[first:end] - stamp, None)[:, :, :9]
+    weight = fuser._weight[first:end, None]
+    design = np.einsum('nra,nam->nrm', fuser._rows[first:end], maps) * weight[:, :, None]
+    rhs = fuser._rhs[first:end] * weight
+    expected_squares = []
+    expected_without = np.full(end - first, np.inf)
+    for acceleration in _FIXED_ACCELERATIONS.T:
+        target = rhs - design[:, :, _ACCELERATION] @ acceleration
+        sums = []
+        for skip in [None] + list(range(end - first)):
+            keep = np.arange(end - first) != (-1 if skip is None else skip)
+            rows = design[keep][:, :, _CV].reshape(-1, len(_CV))
+            values = target[keep].reshape(-1)
+            residual = values - rows @ np.linalg.lstsq(rows, values, rcond=None)[0]
+            sums.append(float(residual @ residual))
+        expected_squares.append(sums[0])
+        expected_without = np.minimum(expected_without, sums[1:])
+    np.testing.assert_allclose(squares, expected_squares, rtol=1e-9)
+    np.testing.assert_allclose(without, expected_without, rtol=1e-9)
+    assert int(np.argmin(without)) == 5  # the wrong blob's removal lowers the misfit most
