@@ -2431,7 +2431,12 @@ class TrajectoryFuser(GatedEstimator):
                 rest / freedom:
             return False
         # (Not recorded as its camera's rejected detection: it was fitted, and may be older
-        # than that camera's newest frame.)
+        # than that camera's newest frame.)  Nor given to the paper's method again.
+        name, stamp = self._names[int(self._camera[first + skip])], int(self._stamp[first + skip])
+        for item in self._recent:
+            if item.observation.camera == name and item.observation.stamp_ns == stamp:
+                self._recent.remove(item)
+                break
         self._remove(first + skip)
         self._removed = True
         self.stats['outlier'] += 1
