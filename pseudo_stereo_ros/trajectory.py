@@ -368,9 +368,10 @@ _CV_MIN = 3
 # is beyond the chi-square bound of this p-value at _MISFIT_NOISE_FACTOR times the measured
 # noise (see _fixed_fallback, _check_young_window); one frame is taken as an outlier where
 # removing it explains the misfit (an F test at this p-value over the frames, Bonferroni).
-# (Factors 1.4, 2, 2.8, 4 and 8 over sweep --messy: 170 / 170 / 169 / 168 / 169 runs over
-# 0.5 m, 175 before; but at 8, or without the bound, a camera's silence at a spiral's start
-# let a fallback's estimate 0.47 m off through.  2: the noise a provisional gate allows.)
+# (Factors 1.4, 2, 2.8, 4 and 8 over sweep --messy, measured before _check_young_window:
+# 170 / 170 / 169 / 168 / 169 runs over 0.5 m, 175 before; but at 8, or without the bound, a
+# camera's silence at a spiral's start let a fallback's estimate 0.47 m off through.  2: the
+# noise a provisional gate allows.)
 _MISFIT_P = 0.001
 _MISFIT_NOISE_FACTOR = 2.0
 # An impact estimate needs the detection off the prediction within this sine of vertical.
@@ -2455,10 +2456,7 @@ class TrajectoryFuser(GatedEstimator):
             the fit), by the leave-one-out identity ``S - e^T (I - H)^-1 e`` of the frame's
             residuals ``e`` and its block ``H`` of the hat matrix
         """
-        maps = _position_map(self._stamp[first:end] - stamp, None)[:, :, :9]
-        weight = self._weight[first:end, None]
-        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight[:, :, None]
-        rhs = self._rhs[first:end] * weight  # (N, 2)
+        design, rhs = self._weighted_design(stamp, first, end)
         velocity = design[:, :, _CV]  # (N, 2, 6)
         rows = velocity.reshape(-1, len(_CV))
         try:
@@ -2485,14 +2483,22 @@ class TrajectoryFuser(GatedEstimator):
             without = np.minimum(without, left)
         return np.array(squares), without
 
+    def _weighted_design(self, stamp: int, first: int,
+                         end: int) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return frames [first, end)'s rows in the coefficients at ``stamp``, weighted (pixels).
+
+        :return: ``(design (N, 2, 12), rhs (N, 2))``, no impact's jump (its columns zero)
+        """
+        maps = _position_map(self._stamp[first:end] - stamp, None)
+        weight = self._weight[first:end, None]
+        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight[:, :, None]
+        return design, self._rhs[first:end] * weight
+
     def _window_system(self, stamp: int, first: int,
                        end: int) -> tuple[np.ndarray, np.ndarray]:
         """Return the normal system (1, 12, 12), (1, 12) of frames [first, end) at ``stamp``."""
-        stamps = self._stamp[first:end]
-        maps = _position_map(stamps - stamp, None)
-        weight = self._weight[first:end, None, None]
-        design = np.einsum('nra,nam->nrm', self._rows[first:end], maps) * weight
-        rhs = self._rhs[first:end] * weight[:, :, 0]
+        design, rhs = self._weighted_design(stamp, first, end)
         return (np.einsum('nri,nrj->ij', design, design)[None],
                 np.einsum('nri,nr->i', design, rhs)[None])
 
