@@ -157,11 +157,12 @@ as fresh too: none fitted over its max gap, the last two taken as outliers off
 the path the same way and growing, one other camera alone carrying the path
 (its depth drifted along that camera's rays; see ``_unheard``).  A shorter
 drift is allowed for as well: a camera back from one or more missed frames
-(within its max gap) while one other camera alone carried the path is fitted
-when it is off the path only along the image of that camera's ray, by no more
-than half the path's acceleration (at most 2 g) times the squared time since
-its last frame (``_drifted``: on spirals at the rounding floor such detections
-were judged stray and the drift grew, up to 79 mm off).
+while one other camera alone carried the path is fitted when it is off the path
+only along the image of that camera's ray (within 45 degrees), by no more than
+half the acceleration a constant velocity or a free fall leaves
+unexplained (at most 2 g) times the squared time since its last frame
+(``_drifted``: on spirals at the rounding floor such detections were judged
+stray and the drift grew, up to 79 mm off).
 
 A late detection (older than the newest frame fitted: streamed cameras with
 different latencies) is fitted without gating too, estimated at its own stamp,
@@ -1087,18 +1088,24 @@ class TrajectoryFuser(GatedEstimator):
         While a camera misses frames (its previous detection fitted, more than
         ``_MISSED_PERIODS`` of its periods ago) and one other camera alone carries the
         path, the path's depth along that camera's rays is extrapolated from this camera's
-        older frames: a turning path (the spiral) drifts there by about half its
-        acceleration times the time squared, 23-31 mm in 67 ms at 30 fps, 20-40 times the
-        innovations' spread at 0.05 px rounding.  The gate judged such a detection stray,
-        the carrier's next detection (blind along its own rays) agreed with the drifted
-        path, and the drift grew until a restart (up to 79 mm off, 0.75-1.19x paper).
-        Such a detection is fitted when its innovation lies along the image of the
-        carrier's ray (:meth:`_along_carrier`) within that drift, ``a * t**2 / 2`` with
-        the path's acceleration ``a`` (at most ``_DRIFT_MAX_ACCELERATION``) and ``t`` the
-        time since this camera's newest frame, in pixels at the predicted depth.  A wrong
-        blob (5-60 px, or a burst's 4 px and growing) rarely lies there: with twice that
-        bound a burst's first blob after a dropped frame was fitted (1.3 m off later).  A
-        silence longer than the max gap is the gate's ``fresh`` (see :meth:`_fit_frame`).
+        older frames.  Where the path turns more than a constant velocity or a free fall
+        explains (the spiral's 1.5 g), it drifts there by about half that acceleration
+        times the time squared: 23-31 mm in 67 ms at 30 fps, 20-40 times the innovations'
+        spread at 0.05 px rounding.  The gate judged such a detection stray, the carrier's
+        next detection (blind along its own rays) agreed with the drifted path, and the
+        drift grew until a restart (up to 79 mm off, 0.75-1.19x paper).  Such a detection
+        is fitted where its innovation lies along the image of the carrier's ray (within
+        45 degrees, :meth:`_along_carrier`; a valid one was 26 degrees off it, 7 px, so
+        the gate across that line is too strict) and within that drift, ``a * t**2 / 2``:
+        ``a`` the smaller of the path's acceleration and its difference from gravity (a
+        straight line or a free fall does not drift: with the whole acceleration, wrong
+        blobs 2-5 px off after a missed frame of a falling ball were fitted, 43-107 mm
+        off, and after a silence beyond the max gap 0.35 m; at most
+        ``_DRIFT_MAX_ACCELERATION``), ``t`` the time since this camera's newest frame, in
+        pixels at the predicted depth.  (A camera silent beyond its max gap is fresh and
+        comes here only off the path across the line, :meth:`_seen_off_path`; capping
+        ``t`` at the max gap rejected a valid one, 7 px and 134 ms, on a spiral.)  A wrong
+        blob (5-60 px, or a burst's 4 px and growing) rarely lies there.
         """
         period = self.gate.period_ns(self._names[index])
         last, carriers = self._carried_since(index)
@@ -1108,9 +1115,10 @@ class TrajectoryFuser(GatedEstimator):
             return False
         assert self._path is not None, 'detections are judged against a path'
         coefficients = self._path[4]
-        acceleration = min(_DRIFT_MAX_ACCELERATION, 2.0 * math.sqrt(
-            coefficients[2] ** 2 + coefficients[5] ** 2 + coefficients[8] ** 2) / (
-            _SCALE_NS * 1e-9) ** 2)
+        scale = 2.0 / (_SCALE_NS * 1e-9) ** 2  # tau^2 coefficient -> acceleration [m/s^2]
+        ax, ay, az = coefficients[2] * scale, coefficients[5] * scale, coefficients[8] * scale
+        acceleration = min(_DRIFT_MAX_ACCELERATION, math.sqrt(ax * ax + ay * ay + az * az),
+                           math.sqrt(ax * ax + ay * ay + (az + GRAVITY_MPS2) ** 2))
         depth = float(self._rotation[index, 2] @ (np.array(prediction) - self._center[index]))
         since = (stamp - last) * 1e-9
         return depth > 0.0 and math.hypot(*found) * depth <= \
@@ -1403,8 +1411,8 @@ class TrajectoryFuser(GatedEstimator):
             # fitted.)
             return 'ok' if statistic <= _DOUBT or uncertain or refining or \
                 self._sigma_count < _SIGMA_MATURE else 'doubtful'
-        if found is not None and pending is None and self._drifted(index, stamp, prediction,
-                                                                   equations, found):
+        if found is not None and pending is None and \
+                self._drifted(index, stamp, prediction, equations, found):
             # Back from a missed frame, off only by the drift of the path along the one
             # carrier's rays meanwhile: fitted, it corrects the path (judged stray, the
             # carrier agreed with the drifted path and the drift grew).
