@@ -297,7 +297,8 @@ _DRIFT_COSINE = math.cos(math.pi / 6.0)
 # previous, rejected one to be fitted (see _check).
 _ALONG_COSINE = math.cos(math.pi / 4.0)
 # A camera missed frames where its newest frame in the window is older than this many of its
-# measured frame periods (jittered intervals reach 1.3; see _drifted).
+# measured frame periods (see _drifted; the measure is the intervals' lower quartile, so
+# intervals jittered by +-15 % reach about 1.45 of it, one missed frame at least 1.85).
 _MISSED_PERIODS = 1.5
 # The entries of the jerk fits' change of time origin that depend on delta (see _jerk_fits),
 # per axis (p, q) of tau^q = sum_p C(q, p) (-delta)^(q - p) tau_reference^p, p < q.
@@ -1099,7 +1100,7 @@ class TrajectoryFuser(GatedEstimator):
         the gate across that line is too strict) and within that drift, ``a * t**2 / 2``:
         ``a`` the smaller of the path's acceleration and its difference from gravity (a
         straight line or a free fall does not drift: with the whole acceleration, wrong
-        blobs 2-5 px off after a missed frame of a falling ball were fitted, 43-107 mm
+        blobs 2-6 px off after a missed frame of a falling ball were fitted, 43-164 mm
         off, and after a silence beyond the max gap 0.35 m; at most
         ``_DRIFT_MAX_ACCELERATION``), ``t`` the time since this camera's newest frame, in
         pixels at the predicted depth.  (A camera silent beyond its max gap is fresh and

@@ -761,7 +761,7 @@ def test_a_wrong_blob_after_a_missed_frame_on_a_ballistic_flight_is_an_outlier(m
     # 2-5 px off along the image of camera1's ray, exactly where a drift would put it.  It
     # must stay an outlier: the drift allowance counts only the acceleration a constant
     # velocity or a free fall leaves unexplained.  (With the path's whole acceleration,
-    # gravity included, the blob was fitted: 43-107 mm off instead of 14 mm.)  The peer is
+    # gravity included, the blob was fitted: 62 and 107 mm off instead of 14 mm.)  The peer is
     # the same flight with the same frames missed and no blob.
     case = Case('default', 30.0, 0.5, 0.0, False, 'bounce', seed=1)
     cameras = make_rig(case.rig)
