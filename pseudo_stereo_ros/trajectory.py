@@ -1115,11 +1115,12 @@ class TrajectoryFuser(GatedEstimator):
                 not self._along_carrier(index, prediction, equations, found):
             return False
         assert self._path is not None, 'detections are judged against a path'
-        coefficients = self._path[4]
-        scale = 2.0 / (_SCALE_NS * 1e-9) ** 2  # tau^2 coefficient -> acceleration [m/s^2]
-        ax, ay, az = coefficients[2] * scale, coefficients[5] * scale, coefficients[8] * scale
-        acceleration = min(_DRIFT_MAX_ACCELERATION, math.sqrt(ax * ax + ay * ay + az * az),
-                           math.sqrt(ax * ax + ay * ay + (az + GRAVITY_MPS2) ** 2))
+        # What the lower-order models (a constant velocity, a free fall) leave unexplained of
+        # the path's acceleration [m per (0.1 s)^2, then m/s^2].
+        x2, y2, z2 = (self._path[4][k] for k in _ACCELERATION)
+        unexplained = min(math.hypot(x2 - fx, y2 - fy, z2 - fz) for fx, fy, fz in _FIXED_LIST)
+        acceleration = min(_DRIFT_MAX_ACCELERATION,
+                           2.0 * unexplained / (_SCALE_NS * 1e-9) ** 2)
         depth = float(self._rotation[index, 2] @ (np.array(prediction) - self._center[index]))
         since = (stamp - last) * 1e-9
         return depth > 0.0 and math.hypot(*found) * depth <= \
